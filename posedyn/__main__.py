@@ -1,0 +1,3 @@
+from posedyn.cli import main
+
+main()
