@@ -1,0 +1,93 @@
+"""One error type for every bad input, and the `check_*` family that raises it.
+
+The CLI and the service turn an `InputError` into the same one-line message: where the
+problem is (file, row, line, column) and what was expected there.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Iterable
+
+
+class InputError(ValueError):
+    """A value, file or message that does not meet the documented format.
+
+    `row` counts data rows from 1 (the header is not a row); `line` is the physical line in
+    the file (the header is line 1). Either may be None when it does not apply.
+    """
+
+    def __init__(
+        self,
+        expected: str,
+        *,
+        got: Any = None,
+        file: str | None = None,
+        row: int | None = None,
+        line: int | None = None,
+        column: str | None = None,
+    ):
+        self.expected = expected
+        self.got = got
+        self.file = file
+        self.row = row
+        self.line = line
+        self.column = column
+        super().__init__(self._message())
+
+    def _message(self) -> str:
+        where = []
+        if self.file is not None:
+            where.append(str(self.file))
+        if self.row is not None:
+            where.append(f"row {self.row}" + (f" (line {self.line})" if self.line is not None else ""))
+        elif self.line is not None:
+            where.append(f"line {self.line}")
+        if self.column is not None:
+            where.append(f"column '{self.column}'")
+        text = f"expected {self.expected}"
+        if self.got is not None:
+            text += f", got {self.got!r}"
+        return (", ".join(where) + ": " if where else "") + text
+
+    def located(self, **where: Any) -> "InputError":
+        """The same error with location fields filled in where they were unknown."""
+        fields = dict(file=self.file, row=self.row, line=self.line, column=self.column)
+        for key, value in where.items():
+            if fields.get(key) is None:
+                fields[key] = value
+        return InputError(self.expected, got=self.got, **fields)
+
+
+def check_finite(name: str, value: float) -> float:
+    if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
+        raise InputError("a finite number", got=value, column=name)
+    return float(value)
+
+
+def check_positive(name: str, value: float) -> float:
+    value = check_finite(name, value)
+    if value <= 0.0:
+        raise InputError("a number > 0", got=value, column=name)
+    return value
+
+
+def check_non_negative(name: str, value: float) -> float:
+    value = check_finite(name, value)
+    if value < 0.0:
+        raise InputError("a number >= 0", got=value, column=name)
+    return value
+
+
+def check_open_interval(name: str, value: float, low: float, high: float) -> float:
+    value = check_finite(name, value)
+    if not low < value < high:
+        raise InputError(f"a number in ({low:g}, {high:g})", got=value, column=name)
+    return value
+
+
+def check_choice(name: str, value: Any, choices: Iterable[Any]) -> Any:
+    choices = tuple(choices)
+    if value not in choices:
+        raise InputError("one of " + ", ".join(map(str, choices)), got=value, column=name)
+    return value

@@ -1,0 +1,311 @@
+"""Read and write modal-test tables (CSV, one row per pose x direction x mode).
+
+Columns (units in the names):
+
+    pose_id, x_mm, y_mm, z_mm,                 tool-tip position in the robot base frame
+    a_deg, b_deg, c_deg  |  beta_deg           KUKA A/B/C (ZYX Euler) or the redundant angle
+    [q1_deg .. q6_deg]                         optional joint angles, all six or none
+    direction, mode, fn_hz                     x|y|z, integer >= 1, natural frequency
+    two or more of zeta, k_n_per_m, c_ns_per_m, m_kg   (k and m alone do not fix damping)
+    [std_fn_hz, std_zeta, std_k_n_per_m]       optional 1-sigma uncertainties (cells may be empty)
+    [source]                                   optional free text
+
+Every problem raises `InputError` naming the file, row, line and column. The writer emits the
+canonical columns (fn_hz, zeta, k_n_per_m) with shortest round-trip float text, so a table
+written and read back is identical.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from posedyn.errors import InputError
+from posedyn.table import (
+    DIRECTIONS,
+    JOINT_COLUMNS,
+    ORIENTATION_COLUMNS,
+    POSITION_COLUMNS,
+    STD_COLUMNS,
+    ModalTable,
+    PoseSet,
+)
+
+DYNAMIC_COLUMNS = ("zeta", "k_n_per_m", "c_ns_per_m", "m_kg")
+MODE_COLUMNS = ("direction", "mode", "fn_hz")
+KNOWN_COLUMNS = frozenset(
+    ("pose_id",)
+    + POSITION_COLUMNS
+    + sum(ORIENTATION_COLUMNS.values(), ())
+    + JOINT_COLUMNS
+    + MODE_COLUMNS
+    + DYNAMIC_COLUMNS
+    + STD_COLUMNS
+    + ("source",)
+)
+#: Relative tolerance for redundant damping/stiffness/mass columns to agree with each other.
+CONSISTENCY_RTOL = 0.01
+
+
+def read_modal_table(path: str | os.PathLike) -> ModalTable:
+    """Load and validate a modal-test CSV file."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError("a readable file", got=exc.strerror, file=str(path)) from None
+    return parse_modal_table(data, name=str(path))
+
+
+def parse_modal_table(data: bytes | str, name: str = "<table>") -> ModalTable:
+    """Validate modal-table text (bytes must be UTF-8; a BOM is allowed)."""
+    text = _decode(data, name) if isinstance(data, bytes) else data
+    try:
+        return _Parser(name).parse(text)
+    except InputError as exc:
+        raise exc.located(file=name) from None
+
+
+def write_modal_table(table: ModalTable, path: str | os.PathLike) -> None:
+    """Write atomically (temporary file in the same folder, then rename)."""
+    path = Path(path)
+    text = format_modal_table(table)
+    fd, tmp = tempfile.mkstemp(dir=path.parent or ".", prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as handle:
+            handle.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def format_modal_table(table: ModalTable) -> str:
+    poses = table.poses
+    std_columns = [c for c in STD_COLUMNS if c in table.std]
+    header = list(poses.columns) + list(MODE_COLUMNS) + ["zeta", "k_n_per_m"] + std_columns
+    if table.source is not None:
+        header.append("source")
+    pose_numbers = poses.numeric_columns()
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(header)
+    for i in range(len(table)):
+        p = int(table.pose_index[i])
+        row = [poses.pose_id[p]] + [_num(pose_numbers[c][p]) for c in poses.columns[1:]]
+        row += [table.direction[i], str(int(table.mode[i])), _num(table.fn_hz[i])]
+        row += [_num(table.zeta[i]), _num(table.k_n_per_m[i])]
+        row += ["" if math.isnan(table.std[c][i]) else _num(table.std[c][i]) for c in std_columns]
+        if table.source is not None:
+            row.append(table.source[i])
+        writer.writerow(row)
+    return buffer.getvalue()
+
+
+def _num(value) -> str:
+    """Shortest text that parses back to the same float."""
+    return repr(float(value))
+
+
+def _decode(data: bytes, name: str) -> str:
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line_start = data.rfind(b"\n", 0, exc.start) + 1
+        line = data.count(b"\n", 0, exc.start) + 1
+        field_index = data.count(b",", line_start, exc.start)
+        header = data.split(b"\n", 1)[0].decode("utf-8", "replace").strip().split(",")
+        column = header[field_index].strip() if field_index < len(header) else None
+        raise InputError(
+            "UTF-8 text",
+            got=f"byte 0x{data[exc.start]:02x} at offset {exc.start}",
+            file=name,
+            row=line - 1 if line > 1 else None,
+            line=line,
+            column=column,
+        ) from None
+
+
+class _Parser:
+    def __init__(self, name: str):
+        self.name = name
+
+    def parse(self, text: str) -> ModalTable:
+        reader = csv.reader(io.StringIO(text, newline=""))
+        header = next(reader, None)
+        while header is not None and not any(cell.strip() for cell in header):
+            header = next(reader, None)
+        if header is None:
+            raise InputError("a header row with the modal-table columns", got="an empty file")
+        header_line = reader.line_num
+        columns = self._check_header([c.strip() for c in header], header_line)
+        rows = []
+        for cells in reader:
+            if not any(cell.strip() for cell in cells):
+                continue
+            number = len(rows) + 1
+            if len(cells) != len(columns):
+                raise InputError(f"{len(columns)} fields like the header", got=len(cells), row=number, line=reader.line_num)
+            rows.append((number, reader.line_num, dict(zip(columns, (c.strip() for c in cells)))))
+        if not rows:
+            raise InputError("at least one data row after the header", got="a header only", line=header_line)
+        return self._build(columns, rows)
+
+    def _check_header(self, columns: list[str], line: int) -> list[str]:
+        seen = set()
+        for name in columns:
+            if name not in KNOWN_COLUMNS:
+                raise InputError("a known column name (see README: modal-test table)", got=name, line=line, column=name)
+            if name in seen:
+                raise InputError("each column once", got=f"'{name}' twice", line=line, column=name)
+            seen.add(name)
+        missing = [c for c in ("pose_id",) + POSITION_COLUMNS + MODE_COLUMNS if c not in seen]
+        if missing:
+            raise InputError("this required column", got="missing", line=line, column=missing[0])
+        has = {kind: [c in seen for c in cols] for kind, cols in ORIENTATION_COLUMNS.items()}
+        if any(has["abc"]) and any(has["beta"]):
+            raise InputError("either a_deg, b_deg, c_deg or beta_deg, not both", line=line, column="beta_deg")
+        if any(has["abc"]) and not all(has["abc"]):
+            absent = next(c for c in ORIENTATION_COLUMNS["abc"] if c not in seen)
+            raise InputError("all of a_deg, b_deg, c_deg", got="missing", line=line, column=absent)
+        if not any(has["abc"]) and not any(has["beta"]):
+            raise InputError("orientation columns a_deg, b_deg, c_deg or beta_deg", got="missing", line=line, column="beta_deg")
+        joints = [c in seen for c in JOINT_COLUMNS]
+        if any(joints) and not all(joints):
+            absent = next(c for c in JOINT_COLUMNS if c not in seen)
+            raise InputError("all six joint columns q1_deg..q6_deg or none", got="missing", line=line, column=absent)
+        dynamic = [c for c in DYNAMIC_COLUMNS if c in seen]
+        if len(dynamic) < 2:
+            raise InputError("two of zeta, k_n_per_m, c_ns_per_m, m_kg", got=dynamic or "none", line=line, column="zeta")
+        if set(dynamic) == {"k_n_per_m", "m_kg"}:
+            raise InputError("zeta or c_ns_per_m as well: k_n_per_m and m_kg fix fn, not damping", line=line, column="zeta")
+        return columns
+
+    def _build(self, columns: list[str], rows: list) -> ModalTable:
+        orientation = "abc" if "a_deg" in columns else "beta"
+        pose_numeric = list(POSITION_COLUMNS + ORIENTATION_COLUMNS[orientation])
+        if "q1_deg" in columns:
+            pose_numeric += list(JOINT_COLUMNS)
+        std_columns = [c for c in STD_COLUMNS if c in columns]
+        dynamic = [c for c in DYNAMIC_COLUMNS if c in columns]
+
+        pose_ids: list[str] = []
+        pose_values: dict[str, tuple] = {}
+        pose_first_row: dict[str, int] = {}
+        seen_keys: dict[tuple, int] = {}
+        out = {k: [] for k in ("pose_index", "direction", "mode", "fn_hz", "zeta", "k_n_per_m")}
+        std = {c: [] for c in std_columns}
+        source = []
+        for number, line, cells in rows:
+            at = dict(row=number, line=line)
+            pose_id = cells["pose_id"]
+            if not pose_id:
+                raise InputError("a non-empty pose_id", got="", column="pose_id", **at)
+            values = tuple(self._number(cells, c, at) for c in pose_numeric)
+            if pose_id in pose_values:
+                for c, mine, first in zip(pose_numeric, values, pose_values[pose_id]):
+                    if mine != first:
+                        raise InputError(
+                            f"{first!r} as in row {pose_first_row[pose_id]} (same pose_id '{pose_id}')",
+                            got=cells[c], column=c, **at,
+                        )
+            else:
+                pose_values[pose_id] = values
+                pose_first_row[pose_id] = number
+                pose_ids.append(pose_id)
+            direction = cells["direction"].lower()
+            if direction not in DIRECTIONS:
+                raise InputError("one of x, y, z", got=cells["direction"], column="direction", **at)
+            mode = self._integer(cells, "mode", at)
+            key = (pose_id, direction, mode)
+            if key in seen_keys:
+                raise InputError(
+                    f"one row per pose_id, direction and mode (already in row {seen_keys[key]})",
+                    got=f"{pose_id}/{direction}/{mode}", column="mode", **at,
+                )
+            seen_keys[key] = number
+            fn = self._number(cells, "fn_hz", at)
+            if fn <= 0:
+                raise InputError("a number > 0", got=cells["fn_hz"], column="fn_hz", **at)
+            zeta, k = self._damping_and_stiffness(cells, dynamic, fn, at)
+            out["pose_index"].append(pose_ids.index(pose_id))
+            out["direction"].append(direction)
+            out["mode"].append(mode)
+            out["fn_hz"].append(fn)
+            out["zeta"].append(zeta)
+            out["k_n_per_m"].append(k)
+            for c in std_columns:
+                std[c].append(self._number(cells, c, at, allow_empty=True, minimum=0.0))
+            if "source" in columns:
+                source.append(cells["source"])
+
+        poses = PoseSet(
+            pose_id=tuple(pose_ids),
+            position_mm=np.array([pose_values[p][:3] for p in pose_ids]),
+            orientation=orientation,
+            orientation_deg=np.array([pose_values[p][3 : 3 + len(ORIENTATION_COLUMNS[orientation])] for p in pose_ids]),
+            joints_deg=np.array([pose_values[p][-6:] for p in pose_ids]) if "q1_deg" in columns else None,
+        )
+        return ModalTable(poses=poses, std=std, source=tuple(source) if "source" in columns else None, **out)
+
+    def _number(self, cells, column, at, allow_empty=False, minimum=None) -> float:
+        text = cells[column]
+        if text == "" and allow_empty:
+            return math.nan
+        try:
+            value = float(text)
+        except ValueError:
+            raise InputError("a number", got=text, column=column, **at) from None
+        if not math.isfinite(value):
+            raise InputError("a finite number (no NaN or inf)", got=text, column=column, **at)
+        if minimum is not None and value < minimum:
+            raise InputError(f"a number >= {minimum:g}", got=text, column=column, **at)
+        return value
+
+    def _integer(self, cells, column, at) -> int:
+        text = cells[column]
+        try:
+            value = int(text)
+        except ValueError:
+            raise InputError("an integer >= 1", got=text, column=column, **at) from None
+        if value < 1:
+            raise InputError("an integer >= 1", got=text, column=column, **at)
+        return value
+
+    def _damping_and_stiffness(self, cells, dynamic, fn_hz, at) -> tuple[float, float]:
+        """zeta and k from any two of zeta, k, c, m (with wn = 2 pi fn):
+        m = k / wn^2,  c = 2 zeta k / wn = 2 zeta m wn."""
+        v = {c: self._number(cells, c, at) for c in dynamic}
+        for c, value in v.items():
+            if value <= 0:
+                raise InputError("a number > 0", got=cells[c], column=c, **at)
+        if "zeta" in v and not 0 < v["zeta"] < 1:
+            raise InputError("a number in (0, 1)", got=cells["zeta"], column="zeta", **at)
+        wn = 2.0 * math.pi * fn_hz
+        if "k_n_per_m" in v:
+            k = v["k_n_per_m"]
+        elif "m_kg" in v:
+            k = v["m_kg"] * wn**2
+        else:  # zeta and c
+            k = v["c_ns_per_m"] * wn / (2.0 * v["zeta"])
+        if "zeta" in v:
+            zeta = v["zeta"]
+        elif "c_ns_per_m" in v:
+            zeta = v["c_ns_per_m"] * wn / (2.0 * k)
+        if not 0 < zeta < 1:
+            used = ", ".join(["fn_hz"] + dynamic)
+            raise InputError(f"damping ratio in (0, 1) derived from {used}", got=round(zeta, 6), column="c_ns_per_m", **at)
+        derived = {"zeta": zeta, "k_n_per_m": k, "c_ns_per_m": 2.0 * zeta * k / wn, "m_kg": k / wn**2}
+        for c, value in v.items():
+            if abs(value - derived[c]) > CONSISTENCY_RTOL * abs(derived[c]):
+                raise InputError(
+                    f"{derived[c]:.6g} (within {CONSISTENCY_RTOL:.0%}, derived from the other columns)",
+                    got=cells[c], column=c, **at,
+                )
+        return zeta, k

@@ -1,0 +1,49 @@
+"""Parameter files (TOML, units in the keys): a `[meta]` table with `kind` and `source`, then
+named tables of values. Physics code gets plain dicts or dataclasses built from them."""
+
+from __future__ import annotations
+
+import os
+import re
+import tomllib
+from pathlib import Path
+
+from posedyn.errors import InputError
+
+
+def read_params(path: str | os.PathLike) -> dict:
+    """Load a parameter TOML file; the error names the file and the line of a syntax error."""
+    path = Path(path)
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except OSError as exc:
+        raise InputError("a readable file", got=exc.strerror, file=str(path)) from None
+    except UnicodeDecodeError as exc:
+        raise InputError("UTF-8 text", got=f"byte offset {exc.start}", file=str(path)) from None
+    try:
+        params = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        match = re.search(r"line (\d+)", str(exc))
+        raise InputError("valid TOML", got=str(exc), file=str(path), line=int(match.group(1)) if match else None) from None
+    meta = params.get("meta")
+    if not isinstance(meta, dict):
+        raise InputError("a [meta] table with kind and source", got="missing", file=str(path), column="meta")
+    for key in ("kind", "source"):
+        if not isinstance(meta.get(key), str) or not meta[key]:
+            raise InputError("a non-empty string", got=meta.get(key), file=str(path), column=f"meta.{key}")
+    return params
+
+
+def flatten(params: dict, prefix: str = "") -> dict[str, object]:
+    """{"a": {"b": 1}, "c": [{"d": 2}]} -> {"a.b": 1, "c[1].d": 2}, for summaries."""
+    out: dict[str, object] = {}
+    for key, value in params.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            out.update(flatten(value, name + "."))
+        elif isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+            for i, item in enumerate(value, 1):
+                out.update(flatten(item, f"{name}[{i}]."))
+        else:
+            out[name] = value
+    return out

@@ -1,0 +1,256 @@
+"""Modal-test tables: tool-tip modes measured (or predicted) at robot poses.
+
+A `ModalTable` holds one row per pose x direction x mode, as frozen numpy arrays. Each mode is
+described canonically by its natural frequency, damping ratio and modal stiffness,
+
+    H_dd(w) = sum_r 1 / (k_r (1 - r_r^2 + 2 i zeta_r r_r)),   r_r = w / w_r,
+
+with modal mass m = k / w_n^2 and viscous damping c = 2 zeta sqrt(k m) derived, not stored.
+Values are kept in the units of the table columns (mm, deg, Hz, N/m) so that a table written
+and read back is bit-for-bit the same; SI views are properties.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from posedyn.errors import InputError, check_open_interval, check_positive
+
+DIRECTIONS = ("x", "y", "z")
+POSITION_COLUMNS = ("x_mm", "y_mm", "z_mm")
+ORIENTATION_COLUMNS = {"abc": ("a_deg", "b_deg", "c_deg"), "beta": ("beta_deg",)}
+JOINT_COLUMNS = tuple(f"q{j}_deg" for j in range(1, 7))
+STD_COLUMNS = ("std_fn_hz", "std_zeta", "std_k_n_per_m")
+Orientation = Literal["abc", "beta"]
+
+
+@dataclass(frozen=True)
+class Mode:
+    """One structural mode seen at the tool tip: H(w) = 1 / (k (1 - r^2 + 2 i zeta r)), r = w / wn."""
+
+    fn_hz: float
+    zeta: float
+    k_n_per_m: float
+
+    def __post_init__(self):
+        check_positive("fn_hz", self.fn_hz)
+        check_open_interval("zeta", self.zeta, 0.0, 1.0)
+        check_positive("k_n_per_m", self.k_n_per_m)
+
+    @property
+    def wn_rad_s(self) -> float:
+        return 2.0 * np.pi * self.fn_hz
+
+    @property
+    def m_kg(self) -> float:
+        return self.k_n_per_m / self.wn_rad_s**2
+
+    @property
+    def c_ns_per_m(self) -> float:
+        return 2.0 * self.zeta * self.k_n_per_m / self.wn_rad_s
+
+    def receptance(self, omega_rad_s: np.ndarray) -> np.ndarray:
+        """H(w) in m/N."""
+        r = np.asarray(omega_rad_s, dtype=float) / self.wn_rad_s
+        return 1.0 / (self.k_n_per_m * (1.0 - r**2 + 2j * self.zeta * r))
+
+
+def _frozen(values, dtype) -> np.ndarray:
+    array = np.array(values, dtype=dtype)
+    array.setflags(write=False)
+    return array
+
+
+def _same(a, b) -> bool:
+    if a is None or b is None:
+        return a is None and b is None
+    if isinstance(a, np.ndarray) and a.dtype.kind == "f":
+        return a.shape == b.shape and bool(np.array_equal(a, b, equal_nan=True))
+    return bool(np.array_equal(np.asarray(a), np.asarray(b)))
+
+
+@dataclass(frozen=True, eq=False)
+class PoseSet:
+    """Robot poses: tool-tip position in the base frame plus an orientation.
+
+    `orientation` is "abc" (KUKA A/B/C: ZYX Euler angles, `orientation_deg` has 3 columns) or
+    "beta" (the redundant angle about a tool axis held along base -z, seed 003; 1 column).
+    `joints_deg` (n x 6) is optional.
+    """
+
+    pose_id: tuple[str, ...]
+    position_mm: np.ndarray
+    orientation: Orientation
+    orientation_deg: np.ndarray
+    joints_deg: np.ndarray | None = None
+
+    def __post_init__(self):
+        n = len(self.pose_id)
+        if n == 0:
+            raise InputError("at least one pose", got=0)
+        if len(set(self.pose_id)) != n:
+            raise InputError("unique pose_id values", column="pose_id")
+        if self.orientation not in ORIENTATION_COLUMNS:
+            raise InputError("orientation 'abc' or 'beta'", got=self.orientation)
+        width = len(ORIENTATION_COLUMNS[self.orientation])
+        object.__setattr__(self, "pose_id", tuple(str(p) for p in self.pose_id))
+        object.__setattr__(self, "position_mm", _frozen(self.position_mm, float).reshape(n, 3))
+        object.__setattr__(self, "orientation_deg", _frozen(self.orientation_deg, float).reshape(n, width))
+        if self.joints_deg is not None:
+            object.__setattr__(self, "joints_deg", _frozen(self.joints_deg, float).reshape(n, 6))
+        for name, array in self.numeric_columns().items():
+            if not np.all(np.isfinite(array)):
+                raise InputError("finite numbers", column=name)
+
+    def __len__(self) -> int:
+        return len(self.pose_id)
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, PoseSet) and all(
+            _same(getattr(self, f), getattr(other, f))
+            for f in ("pose_id", "position_mm", "orientation", "orientation_deg", "joints_deg")
+        )
+
+    @property
+    def position_m(self) -> np.ndarray:
+        return self.position_mm * 1e-3
+
+    @property
+    def columns(self) -> tuple[str, ...]:
+        joints = JOINT_COLUMNS if self.joints_deg is not None else ()
+        return ("pose_id",) + POSITION_COLUMNS + ORIENTATION_COLUMNS[self.orientation] + joints
+
+    def numeric_columns(self) -> dict[str, np.ndarray]:
+        """Pose columns by name (everything but pose_id), one array of length n each."""
+        out = {name: self.position_mm[:, j] for j, name in enumerate(POSITION_COLUMNS)}
+        for j, name in enumerate(ORIENTATION_COLUMNS[self.orientation]):
+            out[name] = self.orientation_deg[:, j]
+        if self.joints_deg is not None:
+            for j, name in enumerate(JOINT_COLUMNS):
+                out[name] = self.joints_deg[:, j]
+        return out
+
+    def index(self, pose_id: str) -> int:
+        try:
+            return self.pose_id.index(str(pose_id))
+        except ValueError:
+            raise InputError("a pose_id present in the table", got=pose_id, column="pose_id") from None
+
+
+@dataclass(frozen=True, eq=False)
+class ModalTable:
+    """Tool-tip modes per pose, direction and mode number (one entry per table row).
+
+    `pose_index[i]` points into `poses`. Optional `std_*` arrays hold measurement standard
+    deviations (NaN where a row gives none); `source` is free text per row.
+    """
+
+    poses: PoseSet
+    pose_index: np.ndarray
+    direction: np.ndarray
+    mode: np.ndarray
+    fn_hz: np.ndarray
+    zeta: np.ndarray
+    k_n_per_m: np.ndarray
+    std: dict[str, np.ndarray] = field(default_factory=dict)
+    source: tuple[str, ...] | None = None
+
+    def __post_init__(self):
+        n = len(np.atleast_1d(self.fn_hz))
+        set_ = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731
+        set_("pose_index", _frozen(self.pose_index, np.int64).reshape(n))
+        set_("direction", _frozen([str(d) for d in np.atleast_1d(self.direction)], "<U1").reshape(n))
+        set_("mode", _frozen(self.mode, np.int64).reshape(n))
+        for name in ("fn_hz", "zeta", "k_n_per_m"):
+            set_(name, _frozen(getattr(self, name), float).reshape(n))
+        unknown = set(self.std) - set(STD_COLUMNS)
+        if unknown:
+            raise InputError("std columns among " + ", ".join(STD_COLUMNS), got=sorted(unknown))
+        set_("std", {k: _frozen(self.std[k], float).reshape(n) for k in STD_COLUMNS if k in self.std})
+        if self.source is not None:
+            set_("source", tuple(str(s) for s in self.source))
+            if len(self.source) != n:
+                raise InputError(f"{n} source entries", got=len(self.source), column="source")
+        if n == 0:
+            raise InputError("at least one mode row", got=0)
+        if np.any((self.pose_index < 0) | (self.pose_index >= len(self.poses))):
+            raise InputError("pose_index within the pose set", column="pose_id")
+        bad = ~np.isin(self.direction, DIRECTIONS)
+        if bad.any():
+            raise InputError("one of x, y, z", got=str(self.direction[bad][0]), column="direction", row=_row(bad))
+        checks = (
+            ("mode", self.mode >= 1, "an integer >= 1"),
+            ("fn_hz", np.isfinite(self.fn_hz) & (self.fn_hz > 0), "a finite number > 0"),
+            ("zeta", np.isfinite(self.zeta) & (self.zeta > 0) & (self.zeta < 1), "a number in (0, 1)"),
+            ("k_n_per_m", np.isfinite(self.k_n_per_m) & (self.k_n_per_m > 0), "a finite number > 0"),
+        ) + tuple((k, np.isnan(v) | (np.isfinite(v) & (v >= 0)), "empty or a finite number >= 0") for k, v in self.std.items())
+        for name, ok, expected in checks:
+            if not ok.all():
+                value = getattr(self, name) if name in ("mode", "fn_hz", "zeta", "k_n_per_m") else self.std[name]
+                raise InputError(expected, got=value[~ok][0].item(), column=name, row=_row(~ok))
+        keys = np.rec.fromarrays([self.pose_index, self.direction, self.mode])
+        _, first, counts = np.unique(keys, return_index=True, return_counts=True)
+        if (counts > 1).any():
+            dup = first[counts > 1][0]
+            raise InputError(
+                "one row per pose_id, direction and mode",
+                got=f"{self.poses.pose_id[self.pose_index[dup]]}/{self.direction[dup]}/{self.mode[dup]} repeated",
+                column="mode",
+            )
+
+    def __len__(self) -> int:
+        return len(self.fn_hz)
+
+    def __eq__(self, other) -> bool:
+        if not isinstance(other, ModalTable) or self.poses != other.poses or set(self.std) != set(other.std):
+            return False
+        fields = ("pose_index", "direction", "mode", "fn_hz", "zeta", "k_n_per_m", "source")
+        return all(_same(getattr(self, f), getattr(other, f)) for f in fields) and all(
+            _same(self.std[k], other.std[k]) for k in self.std
+        )
+
+    @property
+    def wn_rad_s(self) -> np.ndarray:
+        return 2.0 * np.pi * self.fn_hz
+
+    @property
+    def m_kg(self) -> np.ndarray:
+        return self.k_n_per_m / self.wn_rad_s**2
+
+    @property
+    def c_ns_per_m(self) -> np.ndarray:
+        return 2.0 * self.zeta * self.k_n_per_m / self.wn_rad_s
+
+    @property
+    def directions(self) -> tuple[str, ...]:
+        return tuple(d for d in DIRECTIONS if d in set(self.direction.tolist()))
+
+    def mode_numbers(self, direction: str) -> tuple[int, ...]:
+        return tuple(int(m) for m in np.unique(self.mode[self.direction == direction]))
+
+    def modes(self, pose_id: str, direction: str) -> tuple[Mode, ...]:
+        """The modes of one pose in one direction, in mode-number order."""
+        rows = np.flatnonzero((self.pose_index == self.poses.index(pose_id)) & (self.direction == direction))
+        rows = rows[np.argsort(self.mode[rows])]
+        return tuple(Mode(float(self.fn_hz[i]), float(self.zeta[i]), float(self.k_n_per_m[i])) for i in rows)
+
+    def summary(self) -> dict:
+        """Counts and parameter ranges, as `posedyn data check` reports them."""
+        ranges = {}
+        for name, values in (("fn_hz", self.fn_hz), ("zeta", self.zeta), ("k_n_per_m", self.k_n_per_m)):
+            ranges[name] = [float(values.min()), float(values.max())]
+        return {
+            "rows": len(self),
+            "poses": len(np.unique(self.pose_index)),
+            "directions": list(self.directions),
+            "modes": {d: len(self.mode_numbers(d)) for d in self.directions},
+            "ranges": ranges,
+        }
+
+
+def _row(mask: np.ndarray) -> int:
+    """1-based row number of the first True entry."""
+    return int(np.flatnonzero(mask)[0]) + 1
