@@ -1,0 +1,387 @@
+"""Semi-discretization of the milling delay equation (Insperger and Stepan; seed 004 eqs. 8-12).
+
+In modal coordinates q (tool tip U = Phi q) the cut gives
+
+    z' = A(t) z + B(t) q(t - tau),   z = [q; q'],
+    A = [[0, I], [-(W0 + a_p W(t)), -C]],   B = [[0], [a_p W(t)]],   W(t) = Phi^T H(t) Phi
+
+with W0 = diag(w_r^2), C = diag(2 zeta_r w_r). One delay tau is cut into m steps dt = tau / m;
+on step i, W is replaced by its average over the step (exact integrals of H) and the delayed
+position by
+
+    zeroth order:  (q_{i-m} + q_{i-m+1}) / 2           (weights w_a = w_b = 1/2, seed 004 eq. 8)
+    first order:   linear in time from q_{i-m} to q_{i-m+1}
+
+so that z_{i+1} = P_i z_i + Fb_i q_{i-m} + Fa_i q_{i-m+1} (seed 004 eq. 10) with
+P_i = exp(A_i dt), F0_i = int_0^dt exp(A_i s) ds B_i, F1_i = int_0^dt exp(A_i s) (dt - s) / dt ds B_i,
+Fa = Fb = F0 / 2 (zeroth order) or Fa = F1, Fb = F0 - F1 (first order).
+
+The monodromy matrix Psi maps E_0 = [z_0; q_{-1}; ...; q_{-m}] to E_m (seed 004 eqs. 11-12),
+N = 2n + m n. Only the z rows of each D_i are dense, so Psi is applied by running the step
+recursion (8 n^2 m multiply-adds per vector instead of a dense N^2 product), batched over
+(speed, depth) pairs with the batch as the last array axis.
+
+Eigenvalues: a multiplier mu != 0 with eigenvector E_0 has q_{k-m} = q_k / mu over the period, so
+the recursion closes on z alone,
+
+    z_{i+1} = T_i(mu) z_i,  T_i = (mu I - Fa_i S)^-1 (mu P_i + Fb_i S),  S = [I 0],
+    det(mu I - T_{m-1}(mu) ... T_0(mu)) = 0,
+
+a 2n x 2n nonlinear eigenproblem with exactly the nonzero eigenvalues of Psi. The spectral
+radius is found by a short Arnoldi run on Psi (candidates), refined on that 2n x 2n problem by
+secant iteration to machine precision; elements whose refinement does not settle fall back to a
+dense eigensolver on the formed Psi.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+from posedyn.dynamics import ToolTipDynamics
+from posedyn.stability.cutting import Cut, interval_force_matrices
+
+ORDERS = (0, 1)
+
+
+def modal_force_matrices(dyn: ToolTipDynamics, cut: Cut, steps: int) -> np.ndarray:
+    """W_i = Phi^T H_i Phi for each step (steps, n, n), in the feed-aligned axes of the cut."""
+    shapes = dyn.rotated(np.deg2rad(cut.feed_angle_deg)).shapes
+    return np.einsum("ir,sij,jq->srq", shapes, interval_force_matrices(cut, steps), shapes)
+
+
+@dataclass(frozen=True, eq=False)
+class StepMatrices:
+    """P (m, 2n, 2n, B), Fb and Fa (m, 2n, n, B) of a batch of B (speed, depth) pairs."""
+
+    P: np.ndarray
+    Fb: np.ndarray
+    Fa: np.ndarray
+    dt_s: np.ndarray
+
+    @property
+    def steps(self) -> int:
+        return self.P.shape[0]
+
+    @property
+    def n(self) -> int:
+        return self.Fa.shape[2]
+
+    @property
+    def size(self) -> int:
+        """N = 2n + m n, the dimension of the monodromy matrix."""
+        return 2 * self.n + self.steps * self.n
+
+    @property
+    def batch(self) -> int:
+        return self.P.shape[-1]
+
+    def take(self, index) -> "StepMatrices":
+        return StepMatrices(self.P[..., index], self.Fb[..., index], self.Fa[..., index], self.dt_s[index])
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        """Psi x for x of shape (N, B) or (N, B, K): the step recursion run once over the period."""
+        n, m = self.n, self.steps
+        two_n = 2 * n
+        z = x[:two_n]
+        hist = [None] * (2 * m + 1)  # hist[k] = q_{k-m}
+        for j in range(1, m + 1):
+            hist[m - j] = x[two_n + (j - 1) * n : two_n + j * n]
+        hist[m] = z[:n]
+        for i in range(m):
+            z = (
+                np.einsum("rcb,cb...->rb...", self.P[i], z)
+                + np.einsum("rcb,cb...->rb...", self.Fb[i], hist[i])
+                + np.einsum("rcb,cb...->rb...", self.Fa[i], hist[i + 1])
+            )
+            hist[m + i + 1] = z[:n]
+        return np.concatenate([z] + [hist[2 * m - j] for j in range(1, m + 1)], axis=0)
+
+    def used_slots(self) -> np.ndarray:
+        """Indices of the state entries that some step reads: z and the history slots that a
+        cutting step uses. The others are zero columns of the monodromy matrix."""
+        n, m = self.n, self.steps
+        fb = np.any(self.Fb != 0, axis=(1, 2, 3))  # step i reads q_{i-m}, slot j = m - i
+        fa = np.any(self.Fa != 0, axis=(1, 2, 3))  # step i reads q_{i-m+1}, slot j = m - i - 1 (z for i = m-1)
+        read = np.zeros(m + 1, dtype=bool)  # read[j]: slot of q_{-j}
+        read[m - np.flatnonzero(fb)] = True
+        read[m - 1 - np.flatnonzero(fa)] = True
+        slots = [np.arange(2 * n)] + [2 * n + (j - 1) * n + np.arange(n) for j in range(1, m + 1) if read[j]]
+        return np.concatenate(slots)
+
+    @property
+    def used_size(self) -> int:
+        return len(self.used_slots())
+
+    def monodromy(self, reduced: bool = False) -> np.ndarray:
+        """The dense monodromy matrices, shape (B, N, N) (for small batches and checks). With
+        `reduced`, only the rows and columns of `used_slots()`: the other columns are zero, so
+        the reduced matrix has the same eigenvalues less some zeros."""
+        cols = self.used_slots() if reduced else np.arange(self.size)
+        eye = np.zeros((self.size, self.batch, len(cols)))
+        eye[cols, :, np.arange(len(cols))] = 1.0
+        psi = self.apply(eye).transpose(1, 0, 2)
+        return np.ascontiguousarray(psi[:, cols] if reduced else psi)
+
+    def transfer(self, i: int, mu: np.ndarray) -> np.ndarray:
+        """T_i(mu) = (mu I - Fa_i S)^-1 (mu P_i + Fb_i S), shape (2n, 2n, B), complex.
+
+        mu I - Fa_i S is block lower triangular ([[mu I - Fa_top, 0], [-Fa_bottom, mu I]]), so
+        only an n x n block is inverted."""
+        n = self.n
+        fa_top, fa_bot = self.Fa[i, :n], self.Fa[i, n:]
+        right = mu * self.P[i]
+        right[:, :n] = right[:, :n] + self.Fb[i]
+        if n == 1:
+            top = right[0] / (mu - fa_top[0, 0])
+            return np.stack([top, (fa_bot[0, 0] * top + right[1]) / mu])
+        inverse = np.linalg.inv((mu * np.eye(n)[:, :, None] - fa_top).transpose(2, 0, 1)).transpose(1, 2, 0)
+        top = np.einsum("rcb,cdb->rdb", inverse, right[:n])
+        bottom = (np.einsum("rcb,cdb->rdb", fa_bot, top) + right[n:]) / mu
+        return np.concatenate([top, bottom])
+
+    def closed_loop(self, mu: np.ndarray) -> np.ndarray:
+        """M(mu) = T_{m-1}(mu) ... T_0(mu), shape (2n, 2n, B), complex."""
+        mu = np.asarray(mu, dtype=complex)
+        M = self.transfer(0, mu)
+        for i in range(1, self.steps):
+            M = np.einsum("rcb,cdb->rdb", self.transfer(i, mu), M)
+        return M
+
+    def characteristic(self, mu: np.ndarray) -> np.ndarray:
+        """det(mu I - M(mu)) per batch element: zero exactly at the nonzero multipliers."""
+        M = self.closed_loop(mu)
+        A = (np.asarray(mu)[None, None] * np.eye(2 * self.n)[:, :, None] - M).transpose(2, 0, 1)
+        return np.linalg.det(A)
+
+
+def step_matrices(dyn: ToolTipDynamics, w_modal: np.ndarray, depth_m, dt_s, order: int = 0) -> StepMatrices:
+    """Step matrices for B (depth, dt) pairs; steps where no tooth cuts (W_i = 0) share one
+    free-vibration exponential per dt."""
+    if order not in ORDERS:
+        raise ValueError(f"order must be 0 or 1, got {order}")
+    depth_m, dt_s = np.broadcast_arrays(np.asarray(depth_m, dtype=float).reshape(-1), np.asarray(dt_s, dtype=float).reshape(-1))
+    batch, (m, n, _) = len(depth_m), w_modal.shape
+    cutting = np.any(w_modal != 0.0, axis=(1, 2))
+    P = np.empty((m, 2 * n, 2 * n, batch))
+    F0 = np.zeros((m, 2 * n, n, batch))
+    F1 = np.zeros((m, 2 * n, n, batch)) if order == 1 else None
+    wn2, c = np.diag(dyn.wn_rad_s**2), np.diag(2.0 * dyn.zeta * dyn.wn_rad_s)
+    if not cutting.all():
+        free_p, _, _ = _exponentials(np.broadcast_to(wn2, (batch, n, n)), c, dt_s, order=0)
+        P[~cutting] = free_p.transpose(1, 2, 0)[None]
+    idx = np.flatnonzero(cutting)
+    if len(idx):
+        aw = w_modal[idx][:, None] * depth_m[None, :, None, None]  # (k, B, n, n)
+        dt = np.broadcast_to(dt_s[None, :], aw.shape[:2]).reshape(-1)
+        p, g0, g1 = _exponentials((wn2 + aw).reshape(-1, n, n), c, dt, order)
+        to_layout = lambda a: a.reshape(len(idx), batch, *a.shape[1:]).transpose(0, 2, 3, 1)  # noqa: E731
+        awf = aw.reshape(-1, n, n)
+        P[idx] = to_layout(p)
+        F0[idx] = to_layout(g0 @ awf)
+        if order == 1:
+            F1[idx] = to_layout(g1 @ awf)
+    if order == 0:
+        half = 0.5 * F0
+        return StepMatrices(P, half, half, dt_s)
+    return StepMatrices(P, F0 - F1, F1, dt_s)
+
+
+def _exponentials(stiffness: np.ndarray, damping: np.ndarray, dt: np.ndarray, order: int):
+    """For A = [[0, I], [-K, -C]]: exp(A dt), int_0^dt exp(A s) E ds and int_0^dt exp(A s) E (dt - s) / dt ds
+    with E = [[0], [I]], batched over K (k, n, n) and dt (k,), from one augmented exponential."""
+    k, n, _ = stiffness.shape
+    if n == 1:
+        out = _exponentials_sdof(stiffness[:, 0, 0], damping[0, 0], dt, order)
+        if out is not None:
+            return out
+    size = 2 * n + n * (order + 1)
+    M = np.zeros((k, size, size))
+    M[:, :n, n : 2 * n] = np.eye(n)
+    M[:, n : 2 * n, :n] = -stiffness
+    M[:, n : 2 * n, n : 2 * n] = -damping
+    M[:, n : 2 * n, 2 * n : 3 * n] = np.eye(n)
+    if order == 1:
+        M[:, 2 * n : 3 * n, 3 * n :] = np.eye(n) / dt[:, None, None]
+    E = scipy.linalg.expm(M * dt[:, None, None])
+    return E[:, : 2 * n, : 2 * n], E[:, : 2 * n, 2 * n : 3 * n], (E[:, : 2 * n, 3 * n :] if order == 1 else None)
+
+
+def _exponentials_sdof(kappa: np.ndarray, c: float, dt: np.ndarray, order: int):
+    """Closed form for one mode, A = [[0, 1], [-kappa, -c]]:
+    exp(A dt) = exp(-c dt / 2) [C(u) I + S(u) dt (A + c/2 I)],  u = dt^2 (c^2 / 4 - kappa),
+    C(u) = cosh(sqrt u), S(u) = sinh(sqrt u) / sqrt u (real for either sign of u); the input
+    integrals are A^-1 (exp(A dt) - I) E and A^-1 (g0 - dt E) / dt. Returns None when kappa dt^2 is
+    so small that A^-1 would lose digits; the caller then uses the general exponential."""
+    if np.any(np.abs(kappa) * dt**2 < 1e-6):
+        return None
+    u = dt**2 * (0.25 * c**2 - kappa)
+    root = np.sqrt(np.abs(u))
+    small = root < 1e-3
+    safe = np.where(small, 1.0, root)
+    cosh = np.where(small, 1.0 + u / 2.0 + u**2 / 24.0 + u**3 / 720.0, np.where(u >= 0, np.cosh(safe), np.cos(safe)))
+    sinhc = np.where(small, 1.0 + u / 6.0 + u**2 / 120.0 + u**3 / 5040.0, np.where(u >= 0, np.sinh(safe), np.sin(safe)) / safe)
+    decay = np.exp(-0.5 * c * dt)
+    s = sinhc * dt
+    p = np.empty(kappa.shape + (2, 2))
+    p[:, 0, 0] = decay * (cosh + 0.5 * c * s)
+    p[:, 0, 1] = decay * s
+    p[:, 1, 0] = -decay * kappa * s
+    p[:, 1, 1] = decay * (cosh - 0.5 * c * s)
+    g0 = np.empty(kappa.shape + (2, 1))
+    g0[:, 0, 0] = (-c * p[:, 0, 1] - (p[:, 1, 1] - 1.0)) / kappa  # A^-1 = [[-c, -1], [kappa, 0]] / kappa
+    g0[:, 1, 0] = p[:, 0, 1]
+    g1 = None
+    if order == 1:
+        v0, v1 = g0[:, 0, 0], g0[:, 1, 0] - dt
+        g1 = np.empty(kappa.shape + (2, 1))
+        g1[:, 0, 0] = (-c * v0 - v1) / kappa / dt
+        g1[:, 1, 0] = v0 / dt
+    return p, g0, g1
+
+
+# --- eigenvalues -----------------------------------------------------------------------------
+
+#: Arnoldi vectors used to find candidate dominant multipliers.
+KRYLOV_DIM = 12
+#: Candidates (distinct up to conjugation) refined on the 2n x 2n problem.
+CANDIDATES = 3
+#: A Ritz value near the top must agree with its refined multiplier this well to be trusted.
+RITZ_TOLERANCE = 1e-3
+#: Rough costs (this machine class) for choosing LAPACK or Krylov: LAPACK eigenvalues of one
+#: N x N matrix take about DENSE_SECONDS_PER_N3 * N^3; the Krylov path has a fixed cost (many
+#: small numpy calls) plus a small cost per batch element.
+DENSE_SECONDS_PER_N3 = 4e-9
+KRYLOV_SECONDS = 0.012
+KRYLOV_SECONDS_PER_ELEMENT = 6e-5
+
+
+def dominant_multipliers(steps: StepMatrices, seed: int = 0) -> np.ndarray:
+    """The multiplier of largest modulus of each batch element (complex, Im >= 0)."""
+    size = steps.used_size
+    if size <= 2 * KRYLOV_DIM or steps.batch * DENSE_SECONDS_PER_N3 * size**3 < KRYLOV_SECONDS + steps.batch * KRYLOV_SECONDS_PER_ELEMENT:
+        return _dense_dominant(steps)
+    candidates = _arnoldi_candidates(steps, seed)  # (C, B), NaN where not worth refining
+    refined, converged = _refine(steps, candidates)
+    score = np.where(converged, np.abs(refined), -1.0)
+    pick = np.argmax(score, axis=0)
+    best = np.take_along_axis(refined, pick[None], axis=0)[0]
+    ok = np.take_along_axis(converged, pick[None], axis=0)[0]
+    # A candidate near the top that did not settle, or settled far from its Ritz value, shows
+    # that the Krylov space had not resolved the outer spectrum there: ask the dense solver.
+    near_top = np.isfinite(candidates) & (np.abs(candidates) >= 0.9 * np.abs(best)[None])
+    unresolved = ~converged | (np.abs(refined - candidates) > RITZ_TOLERANCE * np.abs(candidates))
+    bad = np.flatnonzero(~ok | (near_top & unresolved).any(axis=0))
+    if len(bad):
+        best[bad] = _dense_dominant(steps.take(bad))
+    return best
+
+
+def _dense_dominant(steps: StepMatrices) -> np.ndarray:
+    """Largest multiplier from LAPACK on the formed monodromy, less its zero columns (history
+    slots no cutting step reads: each adds a zero eigenvalue and nothing else)."""
+    eig = np.linalg.eigvals(steps.monodromy(reduced=True))
+    best = np.take_along_axis(eig, np.argmax(np.abs(eig), axis=1)[:, None], axis=1)[:, 0]
+    return np.where(best.imag < 0, best.conj(), best)
+
+
+def _arnoldi_candidates(steps: StepMatrices, seed: int):
+    """Top Ritz values after KRYLOV_DIM Arnoldi steps (classical Gram-Schmidt, twice), distinct
+    up to conjugation, shape (CANDIDATES, B); NaN where a candidate is below 0.9 of the largest."""
+    size, batch, k = steps.size, steps.batch, KRYLOV_DIM
+    rng = np.random.default_rng(seed)
+    V = np.zeros((k + 1, size, batch))
+    H = np.zeros((k + 1, k, batch))
+    v = rng.standard_normal((size, batch))
+    V[0] = v / np.linalg.norm(v, axis=0)
+    scale = np.zeros(batch)
+    for j in range(k):
+        w = steps.apply(V[j])
+        scale = np.maximum(scale, np.linalg.norm(w, axis=0))
+        for _ in range(2):
+            h = np.einsum("jnb,nb->jb", V[: j + 1], w)
+            w = w - np.einsum("jnb,jb->nb", V[: j + 1], h)
+            H[: j + 1, j] += h
+        norm = np.linalg.norm(w, axis=0)
+        alive = norm > 1e-13 * np.maximum(scale, 1e-300)
+        H[j + 1, j] = np.where(alive, norm, 0.0)
+        V[j + 1] = np.where(alive, w / np.where(alive, norm, 1.0), 0.0)
+    ritz = np.linalg.eigvals(H[:k].transpose(2, 0, 1))  # (B, k)
+    ritz = np.where(ritz.imag < 0, ritz.conj(), ritz)
+    order = np.argsort(-np.abs(ritz) - 1e-9 * ritz.imag, axis=1)
+    ritz = np.take_along_axis(ritz, order, axis=1)
+    gap = np.abs(ritz[:, :, None] - ritz[:, None, :]) <= 1e-8 * np.abs(ritz[:, None, :])
+    repeat = np.any(np.tril(gap, -1), axis=2)  # equal (up to conjugation) to an earlier, larger one
+    first = np.argsort(repeat, axis=1, kind="stable")[:, :CANDIDATES]
+    count = (~repeat).sum(axis=1, keepdims=True)
+    first = np.where(np.arange(CANDIDATES)[None] < count, first, first[:, :1])
+    picked = np.take_along_axis(ritz, first, axis=1).T
+    top = np.abs(picked[0])
+    worth = (np.abs(picked) >= 0.9 * top) & (top > 0)
+    worth[1:] &= first[:, 1:].T != first[:, :1].T
+    return np.where(worth, picked, np.nan)
+
+
+def _refine(steps: StepMatrices, mu0: np.ndarray, iterations: int = 10):
+    """Secant iteration on det(mu I - M(mu)) = 0 from each finite candidate of mu0 (C, B).
+
+    Returns the refined values and whether each converged (to 1e-13 relative, without moving
+    more than 20 % from its start, which would mean it ran to another multiplier).
+    """
+    shape = mu0.shape
+    start = mu0.reshape(-1)
+    # start slightly off the real axis so that the iteration can reach a complex pair
+    mu = np.where(np.isfinite(start), start + 1e-6j * np.abs(start), 0.0).astype(complex)
+    done = np.zeros(mu.shape, dtype=bool)
+    failed = ~np.isfinite(start)
+    column = np.tile(np.arange(steps.batch), shape[0])
+    active = np.flatnonzero(~failed)
+    sub = steps.take(column[active])
+    mu_prev = mu[active] * (1.0 + 1e-7)
+    with np.errstate(all="ignore"):
+        f_prev = sub.characteristic(mu_prev)
+        f = sub.characteristic(mu[active])
+        for _ in range(iterations):
+            denom = f - f_prev
+            step = f * (mu[active] - mu_prev) / denom
+            finite = np.isfinite(step)
+            failed[active[~finite]] = True
+            mu_prev = mu[active]
+            mu[active] = np.where(finite, mu[active] - step, mu[active])
+            settled = finite & (np.abs(step) <= 1e-13 * np.abs(mu[active]))
+            done[active[settled]] = True
+            keep = finite & ~settled
+            if not keep.any():
+                break
+            active, mu_prev, f_prev = active[keep], mu_prev[keep], f[keep]
+            sub = steps.take(column[active])
+            f = sub.characteristic(mu[active])
+    moved_far = np.abs(mu - start) > 0.2 * np.abs(start)
+    converged = done & ~failed & ~moved_far
+    mu = np.where(mu.imag < 0, mu.conj(), mu)
+    return mu.reshape(shape), converged.reshape(shape)
+
+
+def _tile(steps: StepMatrices, count: int) -> StepMatrices:
+    if count == 1:
+        return steps
+    tile = lambda a: np.tile(a, (1,) * (a.ndim - 1) + (count,))  # noqa: E731
+    return StepMatrices(tile(steps.P), tile(steps.Fb), tile(steps.Fa), np.tile(steps.dt_s, count))
+
+
+def floquet_positions(steps: StepMatrices, mu: np.ndarray) -> np.ndarray:
+    """Positions q_0..q_{m-1} over one period of the Floquet solution with multiplier mu,
+    shape (m, n, B): the eigenvector of the monodromy matrix (up to scale), rebuilt by running
+    z_{i+1} = T_i(mu) z_i from the null vector z_0 of mu I - M(mu)."""
+    n, m = steps.n, steps.steps
+    mu = np.asarray(mu, dtype=complex).reshape(-1)
+    values, vectors = np.linalg.eig(steps.closed_loop(mu).transpose(2, 0, 1))
+    pick = np.argmin(np.abs(values - mu[:, None]), axis=1)
+    z = np.take_along_axis(vectors, pick[:, None, None], axis=2)[:, :, 0].T  # (2n, B)
+    q = np.empty((m, n, len(mu)), dtype=complex)
+    for i in range(m):
+        q[i] = z[:n]
+        z = np.einsum("rcb,cb->rb", steps.transfer(i, mu), z)
+    return q
