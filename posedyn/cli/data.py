@@ -1,51 +1,18 @@
-"""The `posedyn` command line. Parses flags, calls the library, prints a table or `--json`.
-
-Bad input anywhere ends in one line on stderr (`error: <file>, row <r> (line <l>), column
-'<c>': expected ...`) and exit status 2, never a traceback.
-"""
+"""`posedyn data`: validate and summarise modal-test tables and parameter files."""
 
 from __future__ import annotations
 
-import json
-import sys
 from pathlib import Path
-from typing import Optional
 
 import typer
-from rich.console import Console
 from rich.table import Table
 
-from posedyn import __version__
+from posedyn.cli.common import console, print_json
 from posedyn.errors import InputError
 from posedyn.io import flatten, read_modal_table, read_params
 
-app = typer.Typer(
-    help="Pose-dependent tool-tip dynamics, chatter prediction and absorber/controller schedules for robotic milling.",
-    no_args_is_help=True,
-    pretty_exceptions_enable=False,
-    add_completion=False,
-)
-data_app = typer.Typer(help="Validate and summarise modal-test tables and parameter files.", no_args_is_help=True)
-app.add_typer(data_app, name="data")
-
-out = Console(width=None if sys.stdout.isatty() else 140)
-
-
-def _version(value: bool):
-    if value:
-        print(f"posedyn {__version__}")
-        raise typer.Exit()
-
-
-@app.callback()
-def _root(
-    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Print the version and exit."),
-):
-    pass
-
-
-def _print_json(value) -> None:
-    print(json.dumps(value, indent=2))
+app = typer.Typer(help="Validate and summarise modal-test tables and parameter files.", no_args_is_help=True)
+out = console
 
 
 MODAL_COLUMNS = ("rows", "poses", "directions", "modes", "fn_hz", "zeta", "k_n_per_m")
@@ -73,7 +40,7 @@ def _modal_summary_table(title: str, summaries: dict[str, dict]) -> Table:
     return table
 
 
-@data_app.command("check")
+@app.command("check")
 def data_check(
     file: Path = typer.Argument(..., help="Modal-test table (CSV)."),
     as_json: bool = typer.Option(False, "--json", help="Print {rows, poses, directions, modes} as JSON."),
@@ -81,12 +48,12 @@ def data_check(
     """Validate a modal-test table and summarise it. Exit 0 when valid, 2 when not."""
     summary = read_modal_table(file).summary()
     if as_json:
-        _print_json({k: summary[k] for k in ("rows", "poses", "directions", "modes")})
+        print_json({k: summary[k] for k in ("rows", "poses", "directions", "modes")})
     else:
         out.print(_modal_summary_table("valid modal-test table", {str(file): summary}))
 
 
-@data_app.command("summary")
+@app.command("summary")
 def data_summary(
     folder: Path = typer.Argument(Path("datasets"), help="Folder to walk (CSV modal tables and TOML parameter files)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object per file."),
@@ -106,7 +73,7 @@ def data_summary(
             values = {k: v for k, v in flatten(params).items() if not k.startswith("meta.")}
             report.append({"file": str(path), "kind": params["meta"]["kind"], "source": params["meta"]["source"], "values": values})
     if as_json:
-        _print_json(report)
+        print_json(report)
         return
     out.print(f"[bold]{len(files)} files under {folder}/ are valid[/bold]")
     tables = {item["file"]: item for item in report if item["kind"] == "modal_table"}
@@ -120,11 +87,3 @@ def data_summary(
             for key, value in item["values"].items():
                 table.add_row(key, f"{value:g}" if isinstance(value, float) else str(value))
             out.print(table)
-
-
-def main(argv: Optional[list[str]] = None) -> None:
-    try:
-        app(args=argv, prog_name="posedyn")
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        sys.exit(2)

@@ -1,0 +1,47 @@
+"""The `posedyn` command line: parses flags, calls the library, prints a table or `--json`.
+
+Bad input anywhere ends in one line on stderr (`error: <file>, row <r> (line <l>), column
+'<c>': expected ...`) and exit status 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Optional
+
+import typer
+
+from posedyn import __version__
+from posedyn.cli import data, stability
+from posedyn.errors import InputError
+
+app = typer.Typer(
+    help="Pose-dependent tool-tip dynamics, chatter prediction and absorber/controller schedules for robotic milling.",
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    add_completion=False,
+)
+app.add_typer(data.app, name="data")
+app.command("chatter")(stability.chatter)
+app.command("lobes")(stability.lobes)
+
+
+def _version(value: bool):
+    if value:
+        print(f"posedyn {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Print the version and exit."),
+):
+    pass
+
+
+def main(argv: Optional[list[str]] = None) -> None:
+    try:
+        app(args=argv, prog_name="posedyn")
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        sys.exit(2)
