@@ -36,9 +36,9 @@ dense eigensolver on the formed Psi.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
-import scipy.linalg
 
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.stability.cutting import Cut, interval_force_matrices
@@ -81,6 +81,26 @@ class StepMatrices:
     def take(self, index) -> "StepMatrices":
         return StepMatrices(self.P[..., index], self.Fb[..., index], self.Fa[..., index], self.dt_s[index])
 
+    @cached_property
+    def _batch_first(self):
+        """P, Fb, Fa as (m, B, rows, cols) for matmul over many right-hand sides."""
+        return tuple(np.ascontiguousarray(a.transpose(0, 3, 1, 2)) for a in (self.P, self.Fb, self.Fa))
+
+    def apply_many(self, x: np.ndarray) -> np.ndarray:
+        """Psi x for x of shape (B, N, K): the step recursion with matmul over the K columns."""
+        n, m = self.n, self.steps
+        P, Fb, Fa = self._batch_first
+        two_n = 2 * n
+        z = x[:, :two_n]
+        hist = [None] * (2 * m + 1)
+        for j in range(1, m + 1):
+            hist[m - j] = x[:, two_n + (j - 1) * n : two_n + j * n]
+        hist[m] = z[:, :n]
+        for i in range(m):
+            z = P[i] @ z + Fb[i] @ hist[i] + Fa[i] @ hist[i + 1]
+            hist[m + i + 1] = z[:, :n]
+        return np.concatenate([z] + [hist[2 * m - j] for j in range(1, m + 1)], axis=1)
+
     def apply(self, x: np.ndarray) -> np.ndarray:
         """Psi x for x of shape (N, B) or (N, B, K): the step recursion run once over the period."""
         n, m = self.n, self.steps
@@ -120,41 +140,41 @@ class StepMatrices:
         `reduced`, only the rows and columns of `used_slots()`: the other columns are zero, so
         the reduced matrix has the same eigenvalues less some zeros."""
         cols = self.used_slots() if reduced else np.arange(self.size)
-        eye = np.zeros((self.size, self.batch, len(cols)))
-        eye[cols, :, np.arange(len(cols))] = 1.0
-        psi = self.apply(eye).transpose(1, 0, 2)
+        eye = np.zeros((self.batch, self.size, len(cols)))
+        eye[:, cols, np.arange(len(cols))] = 1.0
+        psi = self.apply_many(eye)
         return np.ascontiguousarray(psi[:, cols] if reduced else psi)
 
-    def transfer(self, i: int, mu: np.ndarray) -> np.ndarray:
-        """T_i(mu) = (mu I - Fa_i S)^-1 (mu P_i + Fb_i S), shape (2n, 2n, B), complex.
+    def transfers(self, mu: np.ndarray) -> np.ndarray:
+        """T_i(mu) = (mu I - Fa_i S)^-1 (mu P_i + Fb_i S) for every step, shape (m, B, 2n, 2n).
 
         mu I - Fa_i S is block lower triangular ([[mu I - Fa_top, 0], [-Fa_bottom, mu I]]), so
-        only an n x n block is inverted."""
+        only n x n blocks are inverted (all steps at once)."""
         n = self.n
-        fa_top, fa_bot = self.Fa[i, :n], self.Fa[i, n:]
-        right = mu * self.P[i]
-        right[:, :n] = right[:, :n] + self.Fb[i]
+        P, Fb, Fa = self._batch_first
+        mu = np.asarray(mu, dtype=complex)[:, None, None]  # (B, 1, 1)
+        right = mu * P
+        right[..., :n] += Fb
         if n == 1:
-            top = right[0] / (mu - fa_top[0, 0])
-            return np.stack([top, (fa_bot[0, 0] * top + right[1]) / mu])
-        inverse = np.linalg.inv((mu * np.eye(n)[:, :, None] - fa_top).transpose(2, 0, 1)).transpose(1, 2, 0)
-        top = np.einsum("rcb,cdb->rdb", inverse, right[:n])
-        bottom = (np.einsum("rcb,cdb->rdb", fa_bot, top) + right[n:]) / mu
-        return np.concatenate([top, bottom])
+            top = right[:, :, :1] / (mu - Fa[:, :, :1, :1])
+        else:
+            top = np.linalg.solve(mu * np.eye(n) - Fa[:, :, :n], right[:, :, :n])
+        bottom = (Fa[:, :, n:] @ top + right[:, :, n:]) / mu
+        return np.concatenate([top, bottom], axis=2)
 
     def closed_loop(self, mu: np.ndarray) -> np.ndarray:
-        """M(mu) = T_{m-1}(mu) ... T_0(mu), shape (2n, 2n, B), complex."""
-        mu = np.asarray(mu, dtype=complex)
-        M = self.transfer(0, mu)
-        for i in range(1, self.steps):
-            M = np.einsum("rcb,cdb->rdb", self.transfer(i, mu), M)
-        return M
+        """M(mu) = T_{m-1}(mu) ... T_0(mu), shape (B, 2n, 2n), by pairwise products (log2 m levels)."""
+        T = self.transfers(mu)
+        while len(T) > 1:
+            half = len(T) // 2
+            paired = T[1 : 2 * half : 2] @ T[0 : 2 * half : 2]
+            T = np.concatenate([paired, T[-1:]]) if len(T) % 2 else paired
+        return T[0]
 
     def characteristic(self, mu: np.ndarray) -> np.ndarray:
         """det(mu I - M(mu)) per batch element: zero exactly at the nonzero multipliers."""
         M = self.closed_loop(mu)
-        A = (np.asarray(mu)[None, None] * np.eye(2 * self.n)[:, :, None] - M).transpose(2, 0, 1)
-        return np.linalg.det(A)
+        return np.linalg.det(np.asarray(mu)[:, None, None] * np.eye(2 * self.n) - M)
 
 
 def step_matrices(dyn: ToolTipDynamics, w_modal: np.ndarray, depth_m, dt_s, order: int = 0) -> StepMatrices:
@@ -198,15 +218,45 @@ def _exponentials(stiffness: np.ndarray, damping: np.ndarray, dt: np.ndarray, or
         if out is not None:
             return out
     size = 2 * n + n * (order + 1)
+    # Balanced augmented matrix: positions scaled by w = sqrt(max |K|) so that every block is of
+    # the order of the modal frequencies, exp(M) = S^-1 exp(S M S^-1) S with S = diag(w I, I, ...).
+    w = np.sqrt(np.max(np.abs(stiffness), axis=(1, 2)))[:, None, None]
     M = np.zeros((k, size, size))
-    M[:, :n, n : 2 * n] = np.eye(n)
-    M[:, n : 2 * n, :n] = -stiffness
+    M[:, :n, n : 2 * n] = w * np.eye(n)
+    M[:, n : 2 * n, :n] = -stiffness / w
     M[:, n : 2 * n, n : 2 * n] = -damping
     M[:, n : 2 * n, 2 * n : 3 * n] = np.eye(n)
     if order == 1:
         M[:, 2 * n : 3 * n, 3 * n :] = np.eye(n) / dt[:, None, None]
-    E = scipy.linalg.expm(M * dt[:, None, None])
+    E = expm_batched(M * dt[:, None, None])
+    E[:, :n, :] /= w
+    E[:, :, :n] *= w
     return E[:, : 2 * n, : 2 * n], E[:, : 2 * n, 2 * n : 3 * n], (E[:, : 2 * n, 3 * n :] if order == 1 else None)
+
+
+_PADE13 = (
+    64764752532480000.0, 32382376266240000.0, 7771770303897600.0, 1187353796428800.0, 129060195264000.0,
+    10559470521600.0, 670442572800.0, 33522128640.0, 1323241920.0, 40840800.0, 960960.0, 16380.0, 182.0, 1.0,
+)
+
+
+def expm_batched(A: np.ndarray) -> np.ndarray:
+    """exp(A) for a stack (k, s, s): Higham's [13/13] Pade with scaling and squaring, vectorized
+    over the stack (one scaling for the whole stack, from its largest 1-norm)."""
+    b = _PADE13
+    norm = np.max(np.abs(A).sum(axis=1))
+    squarings = max(0, int(np.ceil(np.log2(norm / 5.371920351148152)))) if norm > 0 else 0
+    A = A / 2.0**squarings
+    eye = np.eye(A.shape[-1])
+    A2 = A @ A
+    A4 = A2 @ A2
+    A6 = A4 @ A2
+    U = A @ (A6 @ (b[13] * A6 + b[11] * A4 + b[9] * A2) + b[7] * A6 + b[5] * A4 + b[3] * A2 + b[1] * eye)
+    V = A6 @ (b[12] * A6 + b[10] * A4 + b[8] * A2) + b[6] * A6 + b[4] * A4 + b[2] * A2 + b[0] * eye
+    R = np.linalg.solve(V - U, V + U)
+    for _ in range(squarings):
+        R = R @ R
+    return R
 
 
 def _exponentials_sdof(kappa: np.ndarray, c: float, dt: np.ndarray, order: int):
@@ -256,6 +306,8 @@ RITZ_TOLERANCE = 1e-3
 DENSE_SECONDS_PER_N3 = 4e-9
 KRYLOV_SECONDS = 0.012
 KRYLOV_SECONDS_PER_ELEMENT = 6e-5
+#: Batches with at most this many monodromy entries (B N^2) are formed for the Krylov run.
+FORMED_ELEMENTS = 4_000_000
 
 
 def dominant_multipliers(steps: StepMatrices, seed: int = 0) -> np.ndarray:
@@ -289,8 +341,20 @@ def _dense_dominant(steps: StepMatrices) -> np.ndarray:
 
 def _arnoldi_candidates(steps: StepMatrices, seed: int):
     """Top Ritz values after KRYLOV_DIM Arnoldi steps (classical Gram-Schmidt, twice), distinct
-    up to conjugation, shape (CANDIDATES, B); NaN where a candidate is below 0.9 of the largest."""
-    size, batch, k = steps.size, steps.batch, KRYLOV_DIM
+    up to conjugation, shape (CANDIDATES, B); NaN where a candidate is below 0.9 of the largest.
+
+    Small batches form the (reduced) monodromy once and multiply by it; large ones apply it
+    through the step recursion, which needs no N x N storage."""
+    batch, k = steps.batch, KRYLOV_DIM
+    if batch * steps.used_size**2 <= FORMED_ELEMENTS:
+        psi = steps.monodromy(reduced=True)  # (B, N, N)
+        size = psi.shape[1]
+
+        def operator(x):
+            return np.matmul(psi, x.T[:, :, None])[:, :, 0].T
+
+    else:
+        size, operator = steps.size, steps.apply
     rng = np.random.default_rng(seed)
     V = np.zeros((k + 1, size, batch))
     H = np.zeros((k + 1, k, batch))
@@ -298,7 +362,7 @@ def _arnoldi_candidates(steps: StepMatrices, seed: int):
     V[0] = v / np.linalg.norm(v, axis=0)
     scale = np.zeros(batch)
     for j in range(k):
-        w = steps.apply(V[j])
+        w = operator(V[j])
         scale = np.maximum(scale, np.linalg.norm(w, axis=0))
         for _ in range(2):
             h = np.einsum("jnb,nb->jb", V[: j + 1], w)
@@ -377,11 +441,12 @@ def floquet_positions(steps: StepMatrices, mu: np.ndarray) -> np.ndarray:
     z_{i+1} = T_i(mu) z_i from the null vector z_0 of mu I - M(mu)."""
     n, m = steps.n, steps.steps
     mu = np.asarray(mu, dtype=complex).reshape(-1)
-    values, vectors = np.linalg.eig(steps.closed_loop(mu).transpose(2, 0, 1))
+    values, vectors = np.linalg.eig(steps.closed_loop(mu))
     pick = np.argmin(np.abs(values - mu[:, None]), axis=1)
     z = np.take_along_axis(vectors, pick[:, None, None], axis=2)[:, :, 0].T  # (2n, B)
     q = np.empty((m, n, len(mu)), dtype=complex)
+    T = steps.transfers(mu)
     for i in range(m):
         q[i] = z[:n]
-        z = np.einsum("rcb,cb->rb", steps.transfer(i, mu), z)
+        z = np.einsum("brc,cb->rb", T[i], z)
     return q
