@@ -6,6 +6,6 @@ ROOT = Path(__file__).resolve().parents[1]
 DATASETS = ROOT / "datasets"
 
 
-@pytest.fixture
+@pytest.fixture(scope="session")
 def datasets() -> Path:
     return DATASETS

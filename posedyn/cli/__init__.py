@@ -12,7 +12,7 @@ from typing import Optional
 import typer
 
 from posedyn import __version__
-from posedyn.cli import data, stability
+from posedyn.cli import data, stability, twin
 from posedyn.errors import InputError
 
 app = typer.Typer(
@@ -22,6 +22,7 @@ app = typer.Typer(
     add_completion=False,
 )
 app.add_typer(data.app, name="data")
+app.add_typer(twin.app, name="twin")
 app.command("chatter")(stability.chatter)
 app.command("lobes")(stability.lobes)
 
