@@ -1,8 +1,8 @@
 """Synthetic modal-test campaigns from the twin, with known truth and optional hidden effects.
 
 For every pose: inverse kinematics, the effects' changes to the twin, the twin's modes, the
-`count` robot modes most flexible in each direction (lowest k_rd, reported in frequency order,
-as an impact test would pick the dominant peaks) plus the spindle modes, then measurement noise:
+`count` lowest robot modes seen in each direction (frequency order, as modal tables number
+modes; k_rd = w_r^2 / u_rd^2 per direction) plus the spindle modes, then measurement noise:
 each of fn, zeta, k multiplied by exp(N(0, s)) with s the relative noise (log-normal keeps them
 positive), and the same s written to the std_* columns. One seed gives the same table bit for
 bit.
@@ -58,11 +58,10 @@ def pose_modes(robot: Robot, grid_pose: GridPose, params: TwinParameters, effect
 
 
 def direction_rows(modes: TwinModes, direction: str, count: int):
-    """(fn, zeta, k) of the `count` most flexible robot modes in `direction`, in frequency order,
-    then the spindle modes of that direction."""
+    """(fn, zeta, k) of the `count` lowest robot modes as seen in `direction` (frequency order,
+    as modal tables number modes), then the spindle modes of that direction."""
     k = modes.stiffness(direction)
-    robot = np.sort(np.argsort(k, kind="stable")[:count])
-    rows = [(modes.fn_hz[r], modes.zeta[r], k[r]) for r in robot]
+    rows = [(modes.fn_hz[r], modes.zeta[r], k[r]) for r in range(count)]
     rows += [(m.fn_hz, m.zeta, m.k_n_per_m) for m in modes.spindle_modes.get(direction, ())]
     return rows
 

@@ -92,9 +92,10 @@ class Robot:
     """A serial robot with a tool-tip frame: Pinocchio `Model` (immutable once built) plus the
     geometry the analytic inverse kinematics needs, read from the model itself."""
 
-    def __init__(self, model: pin.Model, name: str = ""):
+    def __init__(self, model: pin.Model, name: str = "", urdf_xml: str | None = None):
         self.model = model
         self.name = name or model.name
+        self.urdf_xml = urdf_xml  # the description it was built from (saved with models)
         if not model.existFrame(TOOL_FRAME):
             raise InputError(f"a frame named '{TOOL_FRAME}' in the robot model", got=list(f.name for f in model.frames)[-3:])
         if model.nq != 6:
@@ -126,8 +127,12 @@ class Robot:
             if not (math.isfinite(payload_kg) and payload_kg >= 0):
                 raise InputError("a payload mass >= 0 kg", got=payload_kg, column="payload_kg")
             _scale_link_mass(tree, PAYLOAD_LINK, payload_kg, str(path))
-        model = pin.buildModelFromXML(ET.tostring(tree.getroot(), encoding="unicode"))
-        return cls(model, name=path.stem)
+        xml = ET.tostring(tree.getroot(), encoding="unicode")
+        return cls(pin.buildModelFromXML(xml), name=path.stem, urdf_xml=xml)
+
+    @classmethod
+    def from_xml(cls, xml: str, name: str = "") -> "Robot":
+        return cls(pin.buildModelFromXML(xml), name=name, urdf_xml=xml)
 
     # --- kinematics ------------------------------------------------------------------------
 

@@ -237,6 +237,31 @@ class ModalTable:
         rows = rows[np.argsort(self.mode[rows])]
         return tuple(Mode(float(self.fn_hz[i]), float(self.zeta[i]), float(self.k_n_per_m[i])) for i in rows)
 
+    def select_poses(self, indices) -> "ModalTable":
+        """The rows of the given poses (indices into `poses`), as a new table."""
+        keep = [int(i) for i in indices]
+        p = self.poses
+        poses = PoseSet(
+            pose_id=tuple(p.pose_id[i] for i in keep),
+            position_mm=p.position_mm[keep],
+            orientation=p.orientation,
+            orientation_deg=p.orientation_deg[keep],
+            joints_deg=None if p.joints_deg is None else p.joints_deg[keep],
+        )
+        remap = {old: new for new, old in enumerate(keep)}
+        rows = np.flatnonzero(np.isin(self.pose_index, keep))
+        return ModalTable(
+            poses=poses,
+            pose_index=[remap[int(i)] for i in self.pose_index[rows]],
+            direction=self.direction[rows],
+            mode=self.mode[rows],
+            fn_hz=self.fn_hz[rows],
+            zeta=self.zeta[rows],
+            k_n_per_m=self.k_n_per_m[rows],
+            std={k: v[rows] for k, v in self.std.items()},
+            source=None if self.source is None else tuple(self.source[i] for i in rows),
+        )
+
     def summary(self) -> dict:
         """Counts and parameter ranges, as `posedyn data check` reports them."""
         ranges = {}

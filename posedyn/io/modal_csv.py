@@ -309,3 +309,73 @@ class _Parser:
                     got=cells[c], column=c, **at,
                 )
         return zeta, k
+
+
+def read_pose_table(path: str | os.PathLike) -> PoseSet:
+    """Poses from a CSV with the pose columns of the modal-table format (pose_id, x_mm, y_mm,
+    z_mm, orientation, optional joints), one row per pose; a full modal table also works."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError("a readable file", got=exc.strerror, file=str(path)) from None
+    text = _decode(data, str(path))
+    first = next(csv.reader(io.StringIO(text)), [])
+    if "direction" in [c.strip() for c in first]:
+        return parse_modal_table(text, str(path)).poses
+    pose_columns = ("pose_id",) + POSITION_COLUMNS + sum(ORIENTATION_COLUMNS.values(), ()) + JOINT_COLUMNS
+    reader = csv.reader(io.StringIO(text, newline=""))
+    header = [c.strip() for c in next(reader, [])]
+    if not header:
+        raise InputError("a header row with the pose columns", got="an empty file", file=str(path))
+    for name in header:
+        if name not in pose_columns:
+            raise InputError("pose columns only (pose_id, x_mm, y_mm, z_mm, beta_deg or a/b/c_deg, q1..q6_deg)", got=name, file=str(path), line=1, column=name)
+    # reuse the modal-table checks by giving every pose a placeholder mode row
+    lines = [",".join(header + ["direction", "mode", "fn_hz", "zeta", "k_n_per_m"])]
+    for cells in reader:
+        if any(c.strip() for c in cells):
+            lines.append(",".join(_quote(c) for c in cells) + ",x,1,1,0.5,1")
+    try:
+        return parse_modal_table("\n".join(lines) + "\n", str(path)).poses
+    except InputError as exc:
+        raise (exc if exc.column != "mode" else InputError("one row per pose_id", got=exc.got, file=str(path), row=exc.row, line=exc.line, column="pose_id")) from None
+
+
+def _quote(cell: str) -> str:
+    buffer = io.StringIO()
+    csv.writer(buffer, lineterminator="").writerow([cell])
+    return buffer.getvalue()
+
+
+def concat_tables(tables: list[ModalTable]) -> ModalTable:
+    """Several modal tables as one (distinct pose_ids, one orientation scheme)."""
+    if len(tables) == 1:
+        return tables[0]
+    schemes = {t.poses.orientation for t in tables}
+    if len(schemes) > 1:
+        raise InputError("tables with the same orientation columns", got=sorted(schemes), column="beta_deg")
+    joints = all(t.poses.joints_deg is not None for t in tables)
+    ids = [i for t in tables for i in t.poses.pose_id]
+    if len(set(ids)) != len(ids):
+        raise InputError("distinct pose_id values across the files", got=sorted({i for i in ids if ids.count(i) > 1})[:3], column="pose_id")
+    poses = PoseSet(
+        pose_id=tuple(ids),
+        position_mm=np.vstack([t.poses.position_mm for t in tables]),
+        orientation=tables[0].poses.orientation,
+        orientation_deg=np.vstack([t.poses.orientation_deg for t in tables]),
+        joints_deg=np.vstack([t.poses.joints_deg for t in tables]) if joints else None,
+    )
+    offsets = np.cumsum([0] + [len(t.poses) for t in tables])
+    std_keys = set.intersection(*(set(t.std) for t in tables))
+    return ModalTable(
+        poses=poses,
+        pose_index=np.concatenate([t.pose_index + o for t, o in zip(tables, offsets)]),
+        direction=np.concatenate([t.direction for t in tables]),
+        mode=np.concatenate([t.mode for t in tables]),
+        fn_hz=np.concatenate([t.fn_hz for t in tables]),
+        zeta=np.concatenate([t.zeta for t in tables]),
+        k_n_per_m=np.concatenate([t.k_n_per_m for t in tables]),
+        std={k: np.concatenate([t.std[k] for t in tables]) for k in std_keys},
+        source=tuple(s for t in tables for s in (t.source or ("",) * len(t))),
+    )

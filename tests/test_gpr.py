@@ -1,0 +1,248 @@
+"""Pose -> modal-parameter GPs: the GP core against independent formulas and scikit-learn,
+seed 004's reproduction, MTGP vs STGP, the physics prior, calibration, persistence, CLI."""
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from sklearn.gaussian_process import GaussianProcessRegressor
+from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
+
+from posedyn import gp
+from posedyn.campaign import Noise, generate_campaign
+from posedyn.effects import DeviceMass
+from posedyn.errors import InputError
+from posedyn.gpr import PoseModel, cross_validate, r2_score, table_targets
+from posedyn.io import read_modal_table, write_modal_table
+from posedyn.io.grid import read_grid, read_twin
+from posedyn.io.model_dir import load_model, save_model
+from posedyn.robot import Robot
+
+
+# --- GP core ------------------------------------------------------------------------------
+
+
+def test_kronecker_likelihood_gradient_and_prediction_match_dense_formulas():
+    rng = np.random.default_rng(0)
+    X = rng.uniform(-2, 2, (30, 3))
+    Y = np.column_stack([np.sin(X[:, 0]), np.sin(X[:, 0]) + 0.3 * X[:, 1], X[:, 2] ** 2]) + 0.05 * rng.standard_normal((30, 3))
+    theta = rng.normal(0, 0.5, 3 + 6 + 3)
+    value, grad = gp.nll_kron(theta, X, Y)
+    assert value == pytest.approx(gp.nll_dense(theta, X, Y), rel=1e-12)
+    numeric = [(gp.nll_kron(theta + h, X, Y)[0] - gp.nll_kron(theta - h, X, Y)[0]) / 2e-6 for h in np.eye(len(theta)) * 1e-6]
+    assert np.allclose(grad, numeric, atol=1e-5 * np.abs(grad).max())
+    model = gp.GP(theta=theta, X=X, Y=Y)
+    Xs = rng.uniform(-2, 2, (4, 3))
+    mean, std = model.predict(Xs, return_std=True)
+    L = gp.cholesky_factor(theta, 3, 3)
+    B = L @ L.T
+    K = np.kron(B, gp.rbf(theta, X, X)) + np.kron(np.diag(np.exp(theta[-3:])), np.eye(30))
+    Ks = np.kron(B, gp.rbf(theta, Xs, X))
+    dense_mean = Ks @ np.linalg.solve(K, Y.T.ravel())
+    dense_var = np.kron(np.diag(B), np.ones(4)) - np.sum(Ks * np.linalg.solve(K, Ks.T).T, axis=1)
+    assert np.allclose(mean, dense_mean.reshape(3, 4).T, atol=1e-9)
+    assert np.allclose(std, np.sqrt(dense_var).reshape(3, 4).T, atol=1e-9)
+
+
+def test_single_task_gp_matches_scikit_learn():
+    rng = np.random.default_rng(1)
+    X = rng.uniform(-2, 2, (50, 2))
+    y = np.sin(X[:, 0]) + 0.5 * X[:, 1] ** 2 + 0.05 * rng.standard_normal(50)
+    y = (y - y.mean()) / y.std()
+    ours = gp.fit_gp(X, y[:, None], restarts=3, seed=0)
+    kernel = ConstantKernel(1.0, (1e-6, 1e6)) * RBF([1.0, 1.0], (0.05, 50.0)) + WhiteKernel(0.01, (1e-6, 10.0))
+    reference = GaussianProcessRegressor(kernel, n_restarts_optimizer=3, random_state=0).fit(X, y)
+    assert ours.log_marginal_likelihood() == pytest.approx(reference.log_marginal_likelihood_value_, abs=0.05)
+    Xs = rng.uniform(-2, 2, (10, 2))
+    assert np.allclose(ours.predict(Xs)[:, 0], reference.predict(Xs), atol=0.02)
+
+
+# --- seed 004 -------------------------------------------------------------------------------
+
+
+SEED004_TABLE2 = {"fn": (0.9864, 0.1173), "k": (0.9221, 0.3608), "c": (0.9887, 62.9154)}  # R2, RMSE (Hz, MN/m, Ns/m)
+
+
+def test_seed004_reproduction_trained_on_positions_1_4_7(datasets):
+    """Seed 004 section 2.1 / Table 2: a GP trained on positions 1, 4, 7 predicts all seven.
+    R2 over the seven positions (the seed compares predicted and actual at every position,
+    Fig. 5) reaches 0.9 for fn, k and c; RMSE over the four held-out positions is reported next
+    to the seed's."""
+    table = read_modal_table(datasets / "seeds/hou2023_positions.csv")
+    train = table.select_poses([0, 3, 6])
+    model = PoseModel("stgp").fit(train)
+    mean = model.predict(table.poses)
+    fn = mean[:, model.targets_.index("x1.fn_hz")]
+    k = mean[:, model.targets_.index("x1.k_n_per_m")]
+    zeta = mean[:, model.targets_.index("x1.zeta")]
+    c = 2 * zeta * k / (2 * math.pi * fn)
+    x = table.direction == "x"
+    truth = {"fn": table.fn_hz[x], "k": table.k_n_per_m[x], "c": table.c_ns_per_m[x]}
+    predicted = {"fn": fn, "k": k, "c": c}
+    held_out = [1, 2, 4, 5]
+    report = {}
+    for name in ("fn", "k", "c"):
+        scale = 1e-6 if name == "k" else 1.0
+        r2 = r2_score(predicted[name], truth[name])
+        rmse = float(np.sqrt(np.mean((predicted[name][held_out] - truth[name][held_out]) ** 2)) * scale)
+        report[name] = (r2, rmse)
+        assert r2 >= 0.9, (name, r2)
+    # our RMSE beside the seed's (printed with -s): k and c come out below the seed's
+    print("seed 004 reproduction (R2 all seven, RMSE held-out) ours vs seed:", report, SEED004_TABLE2)
+    assert report["k"][1] < SEED004_TABLE2["k"][1] and report["c"][1] < SEED004_TABLE2["c"][1]
+    assert report["fn"][1] < 1.2 * SEED004_TABLE2["fn"][1]
+
+
+# --- twin campaigns -------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def twin(datasets):
+    spec = read_twin(datasets / "robots/kr_r2700_twin.toml")
+    return Robot.from_urdf(spec.urdf, payload_kg=spec.payload_kg), spec.params
+
+
+@pytest.fixture(scope="module")
+def campaign(datasets):
+    return read_modal_table(datasets / "campaigns/seed003_twin_s1.csv")
+
+
+def first_mode(table):
+    """Only mode 1 in every direction: x1, y1, z1 (the lowest robot mode seen three ways)."""
+    rows = np.flatnonzero(table.mode == 1)
+    from posedyn.table import ModalTable
+
+    return ModalTable(table.poses, table.pose_index[rows], table.direction[rows], table.mode[rows], table.fn_hz[rows], table.zeta[rows], table.k_n_per_m[rows], {k: v[rows] for k, v in table.std.items()}, None)
+
+
+def test_mtgp_beats_stgp_on_the_correlated_frequency_group(campaign):
+    """Seed 003's finding on the shipped 112-pose campaign, 5-fold CV: the lowest mode's
+    frequency measured in x, y and z (one physical quantity, three noisy measurements) forms a
+    coregionalized group, and the MTGP has the higher mean R2 and the lower R2 spread."""
+    table = first_mode(campaign)
+    mtgp = PoseModel("mtgp").fit(table)
+    fn = [mtgp.targets_.index(t) for t in ("x1.fn_hz", "y1.fn_hz", "z1.fn_hz")]
+    assert sorted(fn) in [sorted(g) for g in mtgp.groups_]
+    scores = {m: cross_validate(lambda m=m: PoseModel(m), table, folds=5, seed=0) for m in ("stgp", "mtgp")}
+    names = ("x1.fn_hz", "y1.fn_hz", "z1.fn_hz")
+    mean = {m: np.mean([scores[m][t]["r2_mean"] for t in names]) for m in scores}
+    spread = {m: np.mean([scores[m][t]["r2_std"] for t in names]) for m in scores}
+    print("fn group: R2 mean", mean, "R2 std", spread)
+    assert mean["mtgp"] > mean["stgp"]
+    assert spread["mtgp"] < spread["stgp"]
+
+
+def as_built_campaign(robot, params, datasets, seed, noise=Noise()):
+    """A robot that differs from the nominal twin: joint stiffnesses off by up to +-30 %, a 65 kg
+    payload instead of 50, and an 8 kg device on the spindle housing."""
+    rng = np.random.default_rng(100 + seed)
+    built = Robot.from_urdf(datasets / "robots/kr_r2700_spindle.urdf", payload_kg=65.0)
+    params_built = params.scaled(rng.uniform(0.7, 1.3, 6))
+    poses = list(read_grid(datasets / "campaigns/seed003_grid.toml").poses)
+    return generate_campaign(built, poses, params_built, noise, seed=seed, effects=(DeviceMass(mass_kg=8.0),))
+
+
+def test_physics_prior_reaches_three_percent_on_the_lowest_mode_with_ten_poses(twin, datasets):
+    robot, params = twin
+    measured = as_built_campaign(robot, params, datasets, seed=3)
+    truth = as_built_campaign(robot, params, datasets, seed=3, noise=Noise(0, 0, 0))
+    order = np.random.default_rng(0).permutation(len(measured.poses))
+    train, test = order[:10], order[10:]
+    names, true_values = table_targets(truth.select_poses(test))
+    j = names.index("x1.fn_hz")
+    errors = {}
+    for method in ("stgp", "mtgp", "physics"):
+        model = PoseModel(method, twin=(robot, params)).fit(measured.select_poses(train))
+        predicted = model.predict(measured.select_poses(test).poses)[:, model.targets_.index("x1.fn_hz")]
+        errors[method] = float(np.mean(np.abs(predicted / true_values[:, j] - 1)))
+    print("mean relative error on the lowest mode's fn with 10 poses:", errors)
+    assert errors["physics"] <= 0.03
+    assert errors["physics"] < errors["stgp"] and errors["physics"] < errors["mtgp"]
+
+
+def test_predictive_std_is_calibrated_on_held_out_poses(twin, datasets):
+    """About 95 % of the true (noise-free) values fall inside +-2 std on poses not trained on."""
+    robot, params = twin
+    measured = as_built_campaign(robot, params, datasets, seed=5)
+    truth = as_built_campaign(robot, params, datasets, seed=5, noise=Noise(0, 0, 0))
+    order = np.random.default_rng(1).permutation(len(measured.poses))
+    train, test = order[:60], order[60:]
+    model = PoseModel("physics", twin=(robot, params)).fit(measured.select_poses(train))
+    mean, std = model.predict(measured.select_poses(test).poses, return_std=True)
+    names, true_values = table_targets(truth.select_poses(test))
+    cols = [model.targets_.index(t) for t in names if t.split(".")[0] in ("x1", "x2", "y1", "y2") and not t.endswith("zeta")]
+    true_cols = [names.index(model.targets_[c]) for c in cols]
+    inside = np.abs(mean[:, cols] - true_values[:, true_cols]) <= 2 * std[:, cols]
+    print("coverage of +-2 std:", inside.mean())
+    assert 0.85 <= inside.mean() <= 0.99
+
+
+# --- persistence and CLI --------------------------------------------------------------------
+
+
+def test_model_directory_round_trip_and_schema_check(twin, campaign, tmp_path):
+    robot, params = twin
+    table = first_mode(campaign).select_poses(range(40))
+    for method in ("stgp", "mtgp", "physics"):
+        model = PoseModel(method, twin=(robot, params)).fit(table)
+        save_model(model, tmp_path / method)
+        again = load_model(tmp_path / method)
+        poses = first_mode(campaign).select_poses(range(40, 60)).poses
+        a, sa = model.predict(poses, return_std=True)
+        b, sb = again.predict(poses, return_std=True)
+        assert np.allclose(a, b, rtol=1e-10) and np.allclose(sa, sb, rtol=1e-8)
+        assert again.training_hash_ == model.training_hash_
+    doc = json.loads((tmp_path / "stgp/model.json").read_text())
+    doc["schema_version"] = 99
+    (tmp_path / "stgp/model.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match=r"model\.json, column 'schema_version': expected schema_version 1.*got 99"):
+        load_model(tmp_path / "stgp")
+
+
+def test_physics_falls_back_without_reachable_poses(twin, datasets):
+    robot, params = twin
+    table = read_modal_table(datasets / "seeds/swan_fixture.csv")  # placeholder pose at the origin
+    from posedyn.table import ModalTable, PoseSet
+
+    two = ModalTable(
+        PoseSet(("a", "b"), np.array([[0, 0, 0], [10, 0, 0]]), "beta", np.zeros((2, 1))),
+        np.r_[np.zeros(len(table), int), np.ones(len(table), int)],
+        np.r_[table.direction, table.direction], np.r_[table.mode, table.mode],
+        np.r_[table.fn_hz, table.fn_hz * 1.01], np.r_[table.zeta, table.zeta], np.r_[table.k_n_per_m, table.k_n_per_m],
+    )
+    model = PoseModel("physics", twin=(robot, params)).fit(two)
+    assert model.physics_["used"] is False and "tool tip at (0.0, 0.0, 0.0) mm" in model.physics_["reason"]
+    assert np.isfinite(model.predict(two.poses)).all()  # a plain stgp underneath
+
+
+def posedyn(*args):
+    return subprocess.run([sys.executable, "-m", "posedyn", *map(str, args)], capture_output=True, text=True)
+
+
+def test_train_and_predict_cli_contract(datasets, tmp_path):
+    result = posedyn("train", datasets / "seeds/hou2023_positions.csv", "--out", tmp_path / "m", "--cv", "3", "--json")
+    assert result.returncode == 0, result.stderr
+    out = json.loads(result.stdout)
+    assert out["method"] == "stgp" and out["n_poses"] == 7
+    assert set(out["cv"]) == {"x1.fn_hz", "x1.zeta", "x1.k_n_per_m", "y1.fn_hz", "y1.zeta", "y1.k_n_per_m"}
+    assert set(out["cv"]["x1.fn_hz"]) == {"r2_mean", "r2_std", "rmse"}
+    poses = tmp_path / "poses.csv"
+    poses.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nnew,1450,0,800,0\n")
+    result = posedyn("predict", tmp_path / "m", "--poses", poses, "--out", tmp_path / "pred.csv", "--json")
+    assert result.returncode == 0, result.stderr
+    predicted = json.loads(result.stdout)
+    assert predicted[0]["pose_id"] == "new"
+    mode = predicted[0]["modes"][0]
+    assert set(mode) == {"direction", "mode", "fn_hz", "std_fn_hz", "zeta", "std_zeta", "k_n_per_m", "std_k_n_per_m"}
+    assert 18.1 < mode["fn_hz"] < 19.4
+    table = read_modal_table(tmp_path / "pred.csv")  # feeds every other command
+    assert set(table.std) == {"std_fn_hz", "std_zeta", "std_k_n_per_m"}
+    chatter = posedyn("chatter", "--modes", tmp_path / "pred.csv", "--rpm", 2000, "--teeth", 3, "--kt-mpa", 796, "--kn-mpa", 169, "--radial-immersion", 0.5, "--json")
+    assert chatter.returncode == 0, chatter.stderr
+    bad = tmp_path / "bad.csv"
+    bad.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nnew,1450,zero,800,0\n")
+    result = posedyn("predict", tmp_path / "m", "--poses", bad)
+    assert result.returncode == 2 and "bad.csv, row 1 (line 2), column 'y_mm'" in result.stderr
