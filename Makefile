@@ -14,11 +14,21 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
+	mkdir -p build/demo
 	$(BIN)/posedyn data summary datasets
 	@echo
 	@echo "Seed 004, position 5: critical depth and chatter frequency at 2000 rpm, and a 0.5 mm cut"
 	$(BIN)/posedyn chatter --modes datasets/seeds/hou2023_positions.csv --pose-id P5 --rpm 2000 \
 		--teeth 3 --kt-mpa 796 --kn-mpa 169 --radial-immersion 0.5 --milling down --depth-mm 0.5
+	@echo
+	@echo "Train the physics-prior pose model on the shipped 112-pose campaign, predict two new poses"
+	$(BIN)/posedyn train datasets/campaigns/seed003_twin_s1.csv --method physics --cv 0 --out build/demo/model
+	printf 'pose_id,x_mm,y_mm,z_mm,beta_deg\nnear,1400,-200,600,-30\nfar,1850,250,600,50\n' > build/demo/poses.csv
+	$(BIN)/posedyn predict build/demo/model --poses build/demo/poses.csv --out build/demo/predicted.csv
+	@echo
+	@echo "Chatter at the far pose from the predicted modes (spindle 10,700 rpm, 3-flute 12.7 mm end mill, Al)"
+	$(BIN)/posedyn chatter --modes build/demo/predicted.csv --pose-id far --rpm 10700 --teeth 3 \
+		--kt-mpa 597.3 --kn-mpa 59.8 --radial-immersion 0.16 --milling down
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
