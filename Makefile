@@ -26,6 +26,12 @@ demo: $(STAMP)
 	printf 'pose_id,x_mm,y_mm,z_mm,beta_deg\nnear,1400,-200,600,-30\nfar,1850,250,600,50\n' > build/demo/poses.csv
 	$(BIN)/posedyn predict build/demo/model --poses build/demo/poses.csv --out build/demo/predicted.csv
 	@echo
+	@echo "Absorber schedule (seed 004's MRF absorber and cut) at seed 004's positions 3, 5 and 7"
+	printf 'pose_id,x_mm,y_mm,z_mm,beta_deg\nP3,1600,0,800,0\nP5,1400,0,800,0\nP7,1200,0,800,0\n' > build/demo/hou2023_poses.csv
+	$(BIN)/posedyn train datasets/seeds/hou2023_positions.csv --cv 0 --out build/demo/hou2023_model
+	$(BIN)/posedyn schedule build/demo/hou2023_model --poses build/demo/hou2023_poses.csv \
+		--cut datasets/seeds/hou2023_cut.toml --policy match --out build/demo/schedule.json
+	@echo
 	@echo "Chatter at the far pose from the predicted modes (spindle 10,700 rpm, 3-flute 12.7 mm end mill, Al)"
 	$(BIN)/posedyn chatter --modes build/demo/predicted.csv --pose-id far --rpm 10700 --teeth 3 \
 		--kt-mpa 597.3 --kn-mpa 59.8 --radial-immersion 0.16 --milling down

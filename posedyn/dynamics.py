@@ -21,11 +21,16 @@ from posedyn.table import ModalTable, Mode
 
 @dataclass(frozen=True, eq=False)
 class ToolTipDynamics:
-    """n modes at the tool tip: natural frequencies, damping ratios and x/y mode shapes."""
+    """n modes at the tool tip: natural frequencies, damping ratios and x/y mode shapes.
+
+    A coupled structure (host plus absorber, non-proportional damping) gives its full
+    mass-normalised stiffness and damping matrices in `coupling`: q'' + C q' + K q = Phi^T F with
+    K, C = coupling; fn_hz and zeta then describe the diagonal only (for frequency grids)."""
 
     fn_hz: np.ndarray
     zeta: np.ndarray
     shapes: np.ndarray
+    coupling: tuple | None = None
 
     def __post_init__(self):
         fn = np.array(self.fn_hz, dtype=float).reshape(-1)
@@ -37,11 +42,31 @@ class ToolTipDynamics:
             raise InputError("natural frequencies > 0", got=fn.tolist(), column="fn_hz")
         if not np.all((zeta > 0) & (zeta < 1)):
             raise InputError("damping ratios in (0, 1)", got=zeta.tolist(), column="zeta")
-        if not np.all(np.isfinite(shapes)) or np.any(np.all(shapes == 0, axis=0)):
+        if not np.all(np.isfinite(shapes)) or (self.coupling is None and np.any(np.all(shapes == 0, axis=0))):
             raise InputError("finite mode shapes with a non-zero x or y component", column="shapes")
         for name, value in (("fn_hz", fn), ("zeta", zeta), ("shapes", shapes)):
             value.setflags(write=False)
             object.__setattr__(self, name, value)
+        if self.coupling is not None:
+            K, C = (np.array(a, dtype=float) for a in self.coupling)
+            if K.shape != (len(fn), len(fn)) or C.shape != K.shape:
+                raise InputError(f"coupling matrices of shape ({len(fn)}, {len(fn)})", got=(K.shape, C.shape), column="coupling")
+            object.__setattr__(self, "coupling", (K, C))
+
+    @classmethod
+    def from_matrices(cls, K: np.ndarray, C: np.ndarray, shapes: np.ndarray) -> "ToolTipDynamics":
+        """A coupled structure in mass-normalised coordinates."""
+        K, C = np.asarray(K, dtype=float), np.asarray(C, dtype=float)
+        wn = np.sqrt(np.diag(K))
+        return cls(fn_hz=wn / (2 * np.pi), zeta=np.diag(C) / (2 * wn), shapes=shapes, coupling=(K, C))
+
+    @property
+    def stiffness_matrix(self) -> np.ndarray:
+        return self.coupling[0] if self.coupling is not None else np.diag(self.wn_rad_s**2)
+
+    @property
+    def damping_matrix(self) -> np.ndarray:
+        return self.coupling[1] if self.coupling is not None else np.diag(2.0 * self.zeta * self.wn_rad_s)
 
     @classmethod
     def from_modes(cls, x: Iterable[Mode] = (), y: Iterable[Mode] = ()) -> "ToolTipDynamics":
@@ -80,11 +105,15 @@ class ToolTipDynamics:
     def rotated(self, angle_rad: float) -> "ToolTipDynamics":
         """The same structure seen in axes turned by `angle_rad` about z (feed along the new x)."""
         c, s = np.cos(angle_rad), np.sin(angle_rad)
-        return ToolTipDynamics(self.fn_hz, self.zeta, np.array([[c, s], [-s, c]]) @ self.shapes)
+        return ToolTipDynamics(self.fn_hz, self.zeta, np.array([[c, s], [-s, c]]) @ self.shapes, self.coupling)
 
     def frf(self, omega_rad_s) -> np.ndarray:
         """Receptance matrix G(i w) = Phi diag(1 / (w_r^2 - w^2 + 2 i zeta_r w_r w)) Phi^T, shape (..., 2, 2)."""
         w = np.asarray(omega_rad_s, dtype=float)[..., None]
+        if self.coupling is not None:
+            K, C = self.coupling
+            dynamic = K - (w[..., None] ** 2) * np.eye(len(K)) + 1j * w[..., None] * C
+            return self.shapes @ np.linalg.solve(dynamic, np.broadcast_to(self.shapes.T, dynamic.shape[:-1] + (2,)))
         wn = self.wn_rad_s
         modal = 1.0 / (wn**2 - w**2 + 2j * self.zeta * wn * w)
         return np.einsum("ir,...r,jr->...ij", self.shapes, modal, self.shapes)

@@ -188,7 +188,7 @@ def step_matrices(dyn: ToolTipDynamics, w_modal: np.ndarray, depth_m, dt_s, orde
     P = np.empty((m, 2 * n, 2 * n, batch))
     F0 = np.zeros((m, 2 * n, n, batch))
     F1 = np.zeros((m, 2 * n, n, batch)) if order == 1 else None
-    wn2, c = np.diag(dyn.wn_rad_s**2), np.diag(2.0 * dyn.zeta * dyn.wn_rad_s)
+    wn2, c = dyn.stiffness_matrix, dyn.damping_matrix
     if not cutting.all():
         free_p, _, _ = _exponentials(np.broadcast_to(wn2, (batch, n, n)), c, dt_s, order=0)
         P[~cutting] = free_p.transpose(1, 2, 0)[None]

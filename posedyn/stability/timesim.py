@@ -75,29 +75,28 @@ def simulate(
     depth = np.atleast_1d(np.asarray(depth_m, dtype=float))
     batch = len(depth)
     tau = float(cut.tooth_period_s(rpm))
-    K = int(steps_per_delay)
-    h = tau / K
+    steps = int(steps_per_delay)
+    h = tau / steps
     shapes = dyn.rotated(np.deg2rad(cut.feed_angle_deg)).shapes
     n = dyn.n_modes
     omega = 2.0 * np.pi * rpm / 60.0
     # modal force matrices at t = k h / 2 over one period (H is tau-periodic)
-    half_times = np.arange(2 * K) * (h / 2.0)
+    half_times = np.arange(2 * steps) * (h / 2.0)
     W = np.einsum("ir,kij,jq->krq", shapes, force_matrix(cut, omega * half_times), shapes)  # (2K, n, n)
     aW = W[:, None] * depth[None, :, None, None]  # (2K, B, n, n)
-    wn2 = dyn.wn_rad_s**2
-    c = 2.0 * dyn.zeta * dyn.wn_rad_s
+    K, C = dyn.stiffness_matrix, dyn.damping_matrix
 
-    total = periods * K
-    q_hist = np.zeros((total + K + 1, batch, n))  # q at grid point k is q_hist[k + K]
-    v_hist = np.zeros((total + K + 1, batch, n))
+    total = periods * steps
+    q_hist = np.zeros((total + steps + 1, batch, n))  # q at grid point k is q_hist[k + steps]
+    v_hist = np.zeros((total + steps + 1, batch, n))
     q = np.zeros((batch, n))
     v = np.zeros((batch, n))
     q[:] = np.linalg.lstsq(shapes, np.full(2, initial_m), rcond=None)[0]  # small displacement
-    q_hist[K], v_hist[K] = q, v
+    q_hist[steps], v_hist[steps] = q, v
 
     def accel(k2, q, v, q_delayed):
-        force = np.einsum("brq,bq->br", aW[k2 % (2 * K)], q_delayed - q)
-        return force - c * v - wn2 * q
+        force = np.einsum("brq,bq->br", aW[k2 % (2 * steps)], q_delayed - q)
+        return force - v @ C.T - q @ K.T
 
     for k in range(total):
         qd0, vd0 = q_hist[k], v_hist[k]  # state at t_k - tau
@@ -113,6 +112,6 @@ def simulate(
         a4 = accel(k2 + 2, q4, v4, qd1)
         q = q + (h / 6.0) * (v + 2.0 * v2 + 2.0 * v3 + v4)
         v = v + (h / 6.0) * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
-        q_hist[k + K + 1], v_hist[k + K + 1] = q, v
-    u = np.einsum("dr,kbr->kdb", shapes, q_hist[K:])
+        q_hist[k + steps + 1], v_hist[k + steps + 1] = q, v
+    u = np.einsum("dr,kbr->kdb", shapes, q_hist[steps:])
     return Simulation(t_s=np.arange(total + 1) * h, u_m=u, tau_s=tau)

@@ -1,0 +1,188 @@
+"""`posedyn absorber tune|field` and `posedyn schedule` (the CLI sits in posedyn so there is
+one `posedyn` command; the physics lives in the `absorber` package)."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from enum import Enum
+from pathlib import Path
+from typing import Optional
+
+import typer
+import numpy as np
+from rich.table import Table
+
+from posedyn.cli.common import console, finite_or_none, print_json
+from posedyn.errors import InputError
+
+app = typer.Typer(help="MRF absorber: optimal tuning, field for a target frequency.", no_args_is_help=True)
+
+
+class Layout(str, Enum):
+    tmd = "tmd"
+    c3 = "idva-c3"
+    c4 = "idva-c4"
+    c5 = "idva-c5"
+    c6 = "idva-c6"
+
+
+class Milling(str, Enum):
+    down = "down"
+    up = "up"
+
+
+class Policy(str, Enum):
+    match = "match"
+    sims = "sims"
+
+
+@app.command("tune")
+def tune(
+    host_fn_hz: float = typer.Option(..., "--host-fn-hz"),
+    host_k_n_per_m: float = typer.Option(..., "--host-k-n-per-m"),
+    host_zeta: float = typer.Option(..., "--host-zeta"),
+    mass_ratio: float = typer.Option(..., "--mass-ratio"),
+    layout: Layout = typer.Option(..., "--layout"),
+    teeth: int = typer.Option(..., "--teeth"),
+    kt_mpa: float = typer.Option(..., "--kt-mpa"),
+    kn_mpa: float = typer.Option(..., "--kn-mpa"),
+    radial_immersion: float = typer.Option(..., "--radial-immersion"),
+    milling: Milling = typer.Option(Milling.down, "--milling"),
+    seed: int = typer.Option(0, "--seed"),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Optimal absorber on a host mode (seed 002 eq. 18) and the absolute stability limits."""
+    from absorber.tuning import Host, absolute_limit_m, min_real_part, tune_sims, uncontrolled_min_real_part
+    from posedyn.stability import Cut, mean_force_matrix
+
+    host = Host(host_fn_hz, host_k_n_per_m, host_zeta)
+    cut = Cut(teeth=teeth, kt_pa=kt_mpa * 1e6, kn_pa=kn_mpa * 1e6, radial_immersion=radial_immersion, milling=milling.value)
+    h = mean_force_matrix(cut)[1, 1]  # the host mode is the flexible direction y, x rigid (seed 002)
+    if h <= 0:
+        raise InputError("a cut whose mean y directional coefficient is positive (seed 002's case)", got=h, column="--radial-immersion")
+    tuned = tune_sims(layout.value, mass_ratio, host_zeta, seed=seed)
+    out = {
+        "layout": layout.value,
+        "gamma": float(tuned.gamma),
+        "zeta_a": float(tuned.zeta_a),
+        "delta": None if tuned.delta is None else float(tuned.delta),
+        "eta": None if tuned.eta is None else float(tuned.eta),
+        "absolute_limit_mm": finite_or_none(absolute_limit_m(min_real_part(tuned, host_zeta), host, h) * 1e3),
+        "uncontrolled_limit_mm": finite_or_none(absolute_limit_m(uncontrolled_min_real_part(host_zeta), host, h) * 1e3),
+    }
+    if as_json:
+        print_json(out)
+        return
+    for key, value in out.items():
+        console.print(f"{key:24s} {value}")
+
+
+@app.command("field")
+def field_cmd(
+    target_hz: float = typer.Option(..., "--target-hz"),
+    absorber: Optional[Path] = typer.Option(None, "--absorber", help="Absorber file (default: seed 004's design)."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """The coil field that tunes the MRF absorber to a frequency."""
+    from absorber.mrf import MRFAbsorber
+
+    a = MRFAbsorber.from_toml(absorber) if absorber else MRFAbsorber()
+    setting = a.field_for_frequency(target_hz, clamp=True)
+    out = {
+        "target_hz": target_hz,
+        "field_mt": setting.field_t * 1e3,
+        "storage_modulus_pa": a.storage_modulus_pa(setting.field_t),
+        "feasible": setting.feasible,
+        "range_hz": list(a.range_hz),
+    }
+    if as_json:
+        print_json(out)
+        return
+    state = "" if setting.feasible else f" (outside {a.range_hz[0]:.2f}-{a.range_hz[1]:.2f} Hz: clamped)"
+    console.print(f"{target_hz:g} Hz -> {out['field_mt']:.2f} mT, G1 = {out['storage_modulus_pa']:.4g} Pa{state}")
+
+
+def schedule(
+    model_dir: Optional[Path] = typer.Argument(None, help="Model directory (or give --modes)."),
+    modes: Optional[Path] = typer.Option(None, "--modes", help="Modal table instead of a model."),
+    poses: Path = typer.Option(..., "--poses", help="Poses to schedule (CSV with the pose columns)."),
+    cut: Path = typer.Option(..., "--cut", help="Cut file (TOML)."),
+    absorber: Optional[Path] = typer.Option(None, "--absorber", help="Absorber file (default: seed 004's design)."),
+    policy: Policy = typer.Option(Policy.match, "--policy"),
+    out: Optional[Path] = typer.Option(None, "--out", help="Write the schedule (JSON)."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Per-pose absorber schedule: chatter, target frequency, field, current, depths."""
+    from absorber.mrf import MRFAbsorber
+    from absorber.schedule import ScheduleConfig, schedule_pose
+    from posedyn.dynamics import ToolTipDynamics
+    from posedyn.io import read_modal_table, read_pose_table
+    from posedyn.io.cut import read_cut
+
+    if (model_dir is None) == (modes is None):
+        raise InputError("either MODEL_DIR or --modes MODAL.csv", column="--modes")
+    the_cut, rpm, steps = read_cut(cut)
+    config = ScheduleConfig(the_cut, rpm, MRFAbsorber.from_toml(absorber) if absorber else MRFAbsorber(), policy=policy.value, steps=steps)
+    pose_set = read_pose_table(poses)
+    if modes is not None:
+        table = read_modal_table(modes)
+        missing = [p for p in pose_set.pose_id if p not in table.poses.pose_id]
+        if missing:
+            raise InputError("pose_ids present in the modal table", got=missing[:3], file=str(poses), column="pose_id")
+        table = table.select_poses([table.poses.index(p) for p in pose_set.pose_id])
+    else:
+        from posedyn.io.model_dir import load_model
+
+        table = load_model(model_dir).predict_table(pose_set)
+    entries = []
+    for p, pose_id in enumerate(table.poses.pose_id):
+        dyn = ToolTipDynamics.from_table(table, pose_id)
+        rows = [i for i in range(len(table)) if table.pose_index[i] == p and table.direction[i] in ("x", "y")]
+        std = table.std.get("std_fn_hz")
+        lowest = min(rows, key=lambda i: table.fn_hz[i])
+        fn_std = float(std[lowest]) if std is not None and np.isfinite(std[lowest]) else 0.0
+        entry = schedule_pose(pose_id, dyn, config, fn_std)
+        entry["modes"] = [
+            {"direction": str(table.direction[i]), "mode": int(table.mode[i]), "fn_hz": float(table.fn_hz[i]), "zeta": float(table.zeta[i]), "k_n_per_m": float(table.k_n_per_m[i])}
+            for i in range(len(table))
+            if table.pose_index[i] == p
+        ]
+        entries.append(entry)
+    if out is not None:
+        _write_json(out, entries)
+    if as_json:
+        print_json(entries)
+        return
+    t = Table(title=f"absorber schedule ({policy.value}) at {rpm:g} rpm", title_justify="left")
+    for c in ("pose", "critical mm", "chatter Hz", "target Hz", "field mT", "current A", "feasible", "with absorber mm"):
+        t.add_column(c, justify="right")
+    for e in entries:
+        a = e["absorber"]
+        t.add_row(
+            e["pose_id"], _fmt(e["critical_depth_mm"]), f"{e['dominant_chatter_hz']:.2f}", f"{a['target_hz']:.2f}", f"{a['field_mt']:.1f}",
+            _fmt(a["current_a"]), "yes" if a["feasible"] else "NO", _fmt(e["critical_depth_with_absorber_mm"]),
+        )
+    console.print(t)
+    if out is not None:
+        console.print(f"wrote {out}")
+
+
+def _fmt(value):
+    return "-" if value is None else f"{value:.3g}"
+
+
+def _write_json(path: Path, value) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as handle:
+            json.dump(value, handle, indent=2, allow_nan=False)
+            handle.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+
