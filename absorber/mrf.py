@@ -26,7 +26,6 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
-from pathlib import Path
 
 from posedyn.errors import InputError, check_non_negative, check_positive
 
@@ -68,10 +67,10 @@ class MRFAbsorber:
     def from_toml(cls, path: str | os.PathLike) -> "MRFAbsorber":
         """Read the `[absorber]`, `[mrf]`, `[field]` tables of an absorber parameter file
         (as datasets/seeds/hou2023_mrf_absorber.toml)."""
-        from posedyn.io import read_params
+        from posedyn.io.params import read_params, reading
 
         p = read_params(path)
-        try:
+        with reading(path, "absorber file"):
             a, m, f = p["absorber"], p["mrf"], p["field"]
             return cls(
                 mass_kg=a["mass_kg"], r1_m=a["r1_m"], r2_m=a["r2_m"], l1_m=a["l1_m"], w1_m=a["w1_m"], h1_m=a["h1_m"], h2_m=a["h2_m"],
@@ -80,10 +79,6 @@ class MRFAbsorber:
                 **{k: m[k] for k in ("loss_factor_mrf",) if k in m},
                 **{k: a[k] for k in ("loss_factor_elastomer",) if k in a},
             )
-        except KeyError as exc:
-            raise InputError("this key in the absorber file", got="missing", file=str(Path(path)), column=str(exc.args[0])) from None
-        except InputError as exc:
-            raise exc.located(file=str(Path(path))) from None
 
     @property
     def a1_m2(self) -> float:

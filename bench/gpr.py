@@ -14,7 +14,6 @@ Usage: python bench/gpr.py [--quick]
 from __future__ import annotations
 
 import argparse
-import math
 import time
 from pathlib import Path
 

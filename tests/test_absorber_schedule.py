@@ -10,13 +10,12 @@ import numpy as np
 import pytest
 
 from absorber.coupling import with_absorber
-from absorber.mrf import MRFAbsorber
 from absorber.schedule import ScheduleConfig, coupled, schedule_pose
 from absorber.tuning import Tuning
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.io import read_modal_table
 from posedyn.io.cut import read_cut
-from posedyn.stability import Cut, Discretization, StabilityModel
+
 from posedyn.stability.timesim import simulate
 from posedyn.table import Mode
 

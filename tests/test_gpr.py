@@ -16,7 +16,7 @@ from posedyn.campaign import Noise, generate_campaign
 from posedyn.effects import DeviceMass
 from posedyn.errors import InputError
 from posedyn.gpr import PoseModel, cross_validate, r2_score, table_targets
-from posedyn.io import read_modal_table, write_modal_table
+from posedyn.io import read_modal_table
 from posedyn.io.grid import read_grid, read_twin
 from posedyn.io.model_dir import load_model, save_model
 from posedyn.robot import Robot

@@ -15,7 +15,7 @@ from posedyn.errors import InputError
 from posedyn.io import format_modal_table, read_modal_table
 from posedyn.io.grid import read_grid, read_twin
 from posedyn.robot import Robot, ToolPose, abc_from_rotation, rotation_from_abc
-from posedyn.twin import TwinParameters, mass_matrix, normal_modes, twin_modes
+from posedyn.twin import mass_matrix, normal_modes, twin_modes
 
 ROBOTS = "datasets/robots"
 

@@ -14,7 +14,7 @@ import typer
 import numpy as np
 from rich.table import Table
 
-from posedyn.cli.common import console, finite_or_none, print_json
+from posedyn.cli.common import Milling, console, finite_or_none, print_json
 from posedyn.errors import InputError
 
 app = typer.Typer(help="MRF absorber: optimal tuning, field for a target frequency.", no_args_is_help=True)
@@ -26,11 +26,6 @@ class Layout(str, Enum):
     c4 = "idva-c4"
     c5 = "idva-c5"
     c6 = "idva-c6"
-
-
-class Milling(str, Enum):
-    down = "down"
-    up = "up"
 
 
 class Policy(str, Enum):

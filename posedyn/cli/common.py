@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+from enum import Enum
 
 from rich.console import Console
 
@@ -18,3 +19,8 @@ def finite_or_none(value: float):
 
 def print_json(value) -> None:
     print(json.dumps(value, indent=2, allow_nan=False))
+
+
+class Milling(str, Enum):
+    down = "down"
+    up = "up"

@@ -13,17 +13,12 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from posedyn.cli.common import console, finite_or_none, print_json
+from posedyn.cli.common import Milling, console, finite_or_none, print_json
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.errors import InputError
 from posedyn.io import read_modal_table
 from posedyn.stability import Cut, Discretization, StabilityModel
 from posedyn.stability import zoa
-
-
-class Milling(str, Enum):
-    down = "down"
-    up = "up"
 
 
 class Method(str, Enum):

@@ -7,15 +7,14 @@ import os
 from pathlib import Path
 
 from posedyn.errors import InputError
-from posedyn.io.params import read_params
+from posedyn.io.params import read_params, reading
 from posedyn.stability import Cut
 
 
 def read_cut(path: str | os.PathLike) -> tuple[Cut, float, int]:
     """(Cut, rpm, steps) from a cut file."""
     p = read_params(path)
-    where = dict(file=str(Path(path)))
-    try:
+    with reading(path, "cut file"):
         c = p["cut"]
         cut = Cut(
             teeth=int(c["teeth"]),
@@ -27,12 +26,6 @@ def read_cut(path: str | os.PathLike) -> tuple[Cut, float, int]:
         )
         rpm = float(c["rpm"])
         steps = int(p.get("stability", {}).get("steps", 40))
-    except KeyError as exc:
-        raise InputError("this key in the cut file", got="missing", column=str(exc.args[0]), **where) from None
-    except (TypeError, ValueError) as exc:
-        raise InputError("numbers in the cut file", got=str(exc), **where) from None
-    except InputError as exc:
-        raise exc.located(**where) from None
     if not rpm > 0:
-        raise InputError("rpm > 0", got=rpm, column="rpm", **where)
+        raise InputError("rpm > 0", got=rpm, column="rpm", file=str(Path(path)))
     return cut, rpm, steps

@@ -39,7 +39,7 @@ from pathlib import Path
 from posedyn.campaign import GridPose
 from posedyn.effects import Effect, make_effect
 from posedyn.errors import InputError
-from posedyn.io.params import read_params
+from posedyn.io.params import read_params, reading
 from posedyn.robot import ToolPose
 from posedyn.table import Mode
 from posedyn.twin import TwinParameters
@@ -55,8 +55,7 @@ class TwinSpec:
 def read_twin(path: str | os.PathLike) -> TwinSpec:
     path = Path(path)
     p = read_params(path)
-    where = dict(file=str(path))
-    try:
+    with reading(path, "twin file"):
         robot = p["robot"]
         urdf = (path.parent / robot["urdf"]).resolve()
         spindle = {}
@@ -70,12 +69,6 @@ def read_twin(path: str | os.PathLike) -> TwinSpec:
             spindle_modes={d: tuple(m) for d, m in spindle.items()},
         )
         return TwinSpec(urdf=urdf, payload_kg=float(robot["payload_kg"]), params=params)
-    except KeyError as exc:
-        raise InputError("this key in the twin file", got="missing", column=str(exc.args[0]), **where) from None
-    except (TypeError, ValueError) as exc:
-        raise InputError("numbers in the twin file", got=str(exc), **where) from None
-    except InputError as exc:
-        raise exc.located(**where) from None
 
 
 @dataclass(frozen=True)
@@ -91,7 +84,7 @@ def read_grid(path: str | os.PathLike) -> Grid:
     p = read_params(path)
     where = dict(file=str(path))
     poses: list[GridPose] = []
-    try:
+    with reading(path, "grid file"):
         if "grid" in p:
             poses += _product(p["grid"])
         for i, item in enumerate(p.get("poses", []), 1):
@@ -100,10 +93,7 @@ def read_grid(path: str | os.PathLike) -> Grid:
             except InputError as exc:
                 raise exc.located(row=i) from None
         effects = tuple(make_effect(e["name"], **{k: v for k, v in e.items() if k != "name"}) for e in p.get("effects", []))
-    except KeyError as exc:
-        raise InputError("this key in the grid file", got="missing", column=str(exc.args[0]), **where) from None
-    except InputError as exc:
-        raise exc.located(**where) from None
+    where = dict(file=str(path))
     if not poses:
         raise InputError("a [grid] table or [[poses]] entries", got="none", **where)
     labels = [g.label for g in poses]

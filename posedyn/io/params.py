@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import re
 import tomllib
+from contextlib import contextmanager
 from pathlib import Path
 
 from posedyn.errors import InputError
@@ -47,3 +48,18 @@ def flatten(params: dict, prefix: str = "") -> dict[str, object]:
         else:
             out[name] = value
     return out
+
+
+@contextmanager
+def reading(path: str | os.PathLike, what: str):
+    """Turn the KeyError / TypeError / ValueError / InputError raised while building objects
+    from a parameter file into one InputError that names the file (and the missing key)."""
+    where = dict(file=str(Path(path)))
+    try:
+        yield
+    except KeyError as exc:
+        raise InputError(f"this key in the {what}", got="missing", column=str(exc.args[0]), **where) from None
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"numbers in the {what}", got=str(exc), **where) from None
+    except InputError as exc:
+        raise exc.located(**where) from None
