@@ -12,7 +12,7 @@ from typing import Optional
 import typer
 
 from posedyn import __version__
-from posedyn.cli import absorber, data, gpr, stability, twin
+from posedyn.cli import absorber, control, data, gpr, stability, twin
 from posedyn.errors import InputError
 
 app = typer.Typer(
@@ -24,6 +24,7 @@ app = typer.Typer(
 app.add_typer(data.app, name="data")
 app.add_typer(twin.app, name="twin")
 app.add_typer(absorber.app, name="absorber")
+app.add_typer(control.app, name="control")
 app.command("schedule")(absorber.schedule)
 app.command("train")(gpr.train)
 app.command("predict")(gpr.predict)

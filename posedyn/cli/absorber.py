@@ -106,6 +106,7 @@ def schedule(
     cut: Path = typer.Option(..., "--cut", help="Cut file (TOML)."),
     absorber: Optional[Path] = typer.Option(None, "--absorber", help="Absorber file (default: seed 004's design)."),
     policy: Policy = typer.Option(Policy.match, "--policy"),
+    actuator: Optional[Path] = typer.Option(None, "--actuator", help="Actuator file for the controller field (default: seed 000's)."),
     out: Optional[Path] = typer.Option(None, "--out", help="Write the schedule (JSON)."),
     as_json: bool = typer.Option(False, "--json"),
 ):
@@ -113,24 +114,14 @@ def schedule(
     from absorber.mrf import MRFAbsorber
     from absorber.schedule import ScheduleConfig, schedule_pose
     from posedyn.dynamics import ToolTipDynamics
-    from posedyn.io import read_modal_table, read_pose_table
     from posedyn.io.cut import read_cut
 
-    if (model_dir is None) == (modes is None):
-        raise InputError("either MODEL_DIR or --modes MODAL.csv", column="--modes")
+    from posedyn.cli.control import control_entries, read_actuator
+
     the_cut, rpm, steps = read_cut(cut)
     config = ScheduleConfig(the_cut, rpm, MRFAbsorber.from_toml(absorber) if absorber else MRFAbsorber(), policy=policy.value, steps=steps)
-    pose_set = read_pose_table(poses)
-    if modes is not None:
-        table = read_modal_table(modes)
-        missing = [p for p in pose_set.pose_id if p not in table.poses.pose_id]
-        if missing:
-            raise InputError("pose_ids present in the modal table", got=missing[:3], file=str(poses), column="pose_id")
-        table = table.select_poses([table.poses.index(p) for p in pose_set.pose_id])
-    else:
-        from posedyn.io.model_dir import load_model
-
-        table = load_model(model_dir).predict_table(pose_set)
+    table = modal_table_for(model_dir, modes, poses)
+    controllers = {e["pose_id"]: e for e in control_entries(table, read_actuator(actuator))}
     entries = []
     for p, pose_id in enumerate(table.poses.pose_id):
         dyn = ToolTipDynamics.from_table(table, pose_id)
@@ -144,6 +135,7 @@ def schedule(
             for i in range(len(table))
             if table.pose_index[i] == p
         ]
+        entry["controller"] = controllers[pose_id]
         entries.append(entry)
     if out is not None:
         _write_json(out, entries)
@@ -162,6 +154,24 @@ def schedule(
     console.print(t)
     if out is not None:
         console.print(f"wrote {out}")
+
+
+def modal_table_for(model_dir: Optional[Path], modes: Optional[Path], poses: Path):
+    """The modes at the requested poses: rows of a modal table, or a model's predictions."""
+    from posedyn.io import read_modal_table, read_pose_table
+
+    if (model_dir is None) == (modes is None):
+        raise InputError("either MODEL_DIR or --modes MODAL.csv", column="--modes")
+    pose_set = read_pose_table(poses)
+    if modes is not None:
+        table = read_modal_table(modes)
+        missing = [p for p in pose_set.pose_id if p not in table.poses.pose_id]
+        if missing:
+            raise InputError("pose_ids present in the modal table", got=missing[:3], file=str(poses), column="pose_id")
+        return table.select_poses([table.poses.index(p) for p in pose_set.pose_id])
+    from posedyn.io.model_dir import load_model
+
+    return load_model(model_dir).predict_table(pose_set)
 
 
 def _fmt(value):

@@ -1,0 +1,102 @@
+"""Active damping with an inertial actuator (seed 000) and its per-pose schedule."""
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from absorber.active import DVF, Actuator, ControlConfig, actuator_angle_to_gravity, gain_schedule, residue_frf
+from posedyn.io import read_modal_table, read_params
+from posedyn.robot import rotation_from_beta
+
+
+@pytest.fixture(scope="module")
+def seed000(datasets):
+    p = read_params(datasets / "seeds/sahu2024_active_damping.toml")
+
+    def frf(name):
+        return residue_frf([(m["fn_hz"], m["zeta"], m["sigma_re_m_per_n"], m["sigma_im_m_per_n"]) for m in p["frf"][name]])
+
+    # H21yy (~ H12yy ~ H22yy) is tabulated with the opposite sign of a direct receptance
+    # (negative imaginary part at resonance); as the collocated H22 it must be passive.
+    return frf("h11yy"), -frf("h21yy")
+
+
+def test_residue_form_gives_passive_direct_receptances(seed000):
+    h11, h22 = seed000
+    for h in (h11, h22):
+        assert h(1j * 2 * math.pi * 9.2).imag < 0
+
+
+def test_interpolation_law_hits_both_measured_mountings():
+    a = Actuator()
+    assert a.fn_hz(math.pi / 2) == pytest.approx(9.0) and a.fn_hz(0.0) == pytest.approx(14.0) and a.fn_hz(math.pi) == pytest.approx(14.0)
+    assert 9.0 < a.fn_hz(math.radians(45)) < 14.0
+
+
+def test_seed000_reproduction_horizontal_and_vertical_with_c1(seed000, capsys):
+    """Seed 000 Fig. 10a / Tables 3-4: with C1 the closed loop at the actuator location is stable
+    up to a finite gain, and K = 2000 Ns/m improves the 9.2 Hz mode's dynamic stiffness of the
+    order of 100 % (the seed measures ~100 % horizontal, 107 % vertical). The linear model gives
+    about 220 %: the seed's improvement saturates at the 36 N actuator limit and was measured with
+    the robot drives on; the vertical case runs here on the same y-direction FRFs (the seed's
+    vertical test is in z at another pose, whose FRFs it does not tabulate)."""
+    h11, h22 = seed000
+    report = {}
+    for name, fn_act in (("horizontal", 9.0), ("vertical", 14.0)):
+        loop = DVF(h11, h22, h22, Actuator(), fn_act)
+        k_max = loop.max_stable_gain()
+        improvement = loop.stiffness_improvement_pct(2000.0, 9.2)
+        report[name] = (k_max, improvement)
+        assert 2000 < k_max < 1e5 and loop.stable(2000.0)
+        assert 50 < improvement < 400
+        assert loop.stiffness_improvement_pct(2000.0, 9.2, where="11") > 50  # at the tool tip too
+    print("max stable gain (Ns/m), improvement at K=2000 (%):", report)
+
+
+def test_a_schedule_for_the_other_orientation_loses_its_margin(seed000):
+    """Seed 000's finding that the mounting orientation matters: gains scheduled with the
+    actuator vertical (14 Hz, C1 designed for 14 Hz) applied where it hangs horizontally (9 Hz)
+    leave the compensator mistuned and the loop without its 6 dB margin."""
+    h11, h22 = seed000
+    vertical = gain_schedule(DVF(h11, h22, h22, Actuator(), 14.0), 9.2, 10.0)
+    assert vertical["gain_margin_db"] >= 6.0
+    misplaced = DVF(h11, h22, h22, Actuator(), 9.0, fn_compensator_hz=14.0)
+    k_max = misplaced.max_stable_gain()
+    assert 20 * math.log10(k_max / vertical["dvf_gain_ns_per_m"]) < 6.0
+    assert not misplaced.stable(vertical["dvf_gain_ns_per_m"])
+
+
+def test_actuator_axis_angle_from_the_pose():
+    R = rotation_from_beta(0.3)
+    assert actuator_angle_to_gravity(R, "x") == pytest.approx(0.0, abs=1e-12)  # the tool axis is vertical
+    assert actuator_angle_to_gravity(R, "y") == pytest.approx(math.pi / 2)
+
+
+def test_schedule_respects_the_force_limit_on_every_pose_of_the_campaign(datasets):
+    from posedyn.cli.control import control_entries
+
+    table = read_modal_table(datasets / "campaigns/seed003_twin_s1.csv")
+    entries = control_entries(table, ControlConfig())
+    assert len(entries) == 112
+    for e in entries:
+        assert e["max_force_n"] <= e["force_limit_n"] and e["gain_margin_db"] >= 6.0 - 1e-9
+        assert e["dvf_gain_ns_per_m"] > 0 and e["dynamic_stiffness_gain_pct"] > 0
+
+
+def test_control_schedule_cli(datasets, tmp_path):
+    poses = tmp_path / "p.csv"
+    poses.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nP5,1400,0,800,0\n")
+    result = subprocess.run(
+        [sys.executable, "-m", "posedyn", "control", "schedule", "--modes", datasets / "seeds/hou2023_positions.csv", "--poses", poses,
+         "--actuator", datasets / "seeds/sahu2024_active_damping.toml", "--json"],
+        capture_output=True, text=True,
+    )
+    assert result.returncode == 0, result.stderr
+    entry = json.loads(result.stdout)[0]
+    assert {"pose_id", "actuator_fn_hz", "dvf_gain_ns_per_m", "gain_margin_db", "dynamic_stiffness_gain_pct", "max_force_n", "virtual_absorber"} <= set(entry)
+    assert entry["actuator_fn_hz"] == pytest.approx(9.0)
+    assert entry["virtual_absorber"]["layout"] == "idva-c3" and entry["virtual_absorber"]["force_ok"]
