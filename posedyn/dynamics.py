@@ -117,3 +117,27 @@ class ToolTipDynamics:
         wn = self.wn_rad_s
         modal = 1.0 / (wn**2 - w**2 + 2j * self.zeta * wn * w)
         return np.einsum("ir,...r,jr->...ij", self.shapes, modal, self.shapes)
+
+
+def combine(*parts: ToolTipDynamics) -> ToolTipDynamics:
+    """The sum of several receptances (e.g. spindle-robot plus workpiece-fixture, seed 001): their
+    modal coordinates side by side, H = H_1 + H_2 + ..."""
+    if any(p.coupling is not None for p in parts):
+        K = _block([p.stiffness_matrix for p in parts])
+        C = _block([p.damping_matrix for p in parts])
+        return ToolTipDynamics.from_matrices(K, C, np.hstack([p.shapes for p in parts]))
+    return ToolTipDynamics(
+        fn_hz=np.concatenate([p.fn_hz for p in parts]),
+        zeta=np.concatenate([p.zeta for p in parts]),
+        shapes=np.hstack([p.shapes for p in parts]),
+    )
+
+
+def _block(blocks):
+    n = sum(len(b) for b in blocks)
+    out = np.zeros((n, n))
+    i = 0
+    for b in blocks:
+        out[i : i + len(b), i : i + len(b)] = b
+        i += len(b)
+    return out

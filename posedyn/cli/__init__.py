@@ -12,7 +12,7 @@ from typing import Optional
 import typer
 
 from posedyn import __version__
-from posedyn.cli import absorber, control, data, gpr, stability, twin
+from posedyn.cli import absorber, control, data, gpr, sle, stability, twin
 from posedyn.errors import InputError
 
 app = typer.Typer(
@@ -29,6 +29,7 @@ app.command("schedule")(absorber.schedule)
 app.command("train")(gpr.train)
 app.command("predict")(gpr.predict)
 app.command("chatter")(stability.chatter)
+app.command("sle")(sle.sle)
 app.command("lobes")(stability.lobes)
 
 

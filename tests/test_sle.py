@@ -1,0 +1,97 @@
+"""Surface location error (seed 001): frequency domain against time domain, limits, compensation."""
+
+import json
+import math
+import subprocess
+import sys
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from posedyn.dynamics import ToolTipDynamics, combine
+from posedyn.io import read_modal_table
+from posedyn.sle import SleCut, compensate, sle_m, sle_quasi_static_m, sle_time_domain_m
+
+CUT = SleCut(teeth=3, kt_pa=597.3e6, kn_pa=59.8e6, tool_diameter_m=12.7e-3, helix_rad=math.radians(40), radial_depth_m=2e-3, axial_depth_m=2.5e-3, feed_per_tooth_m=0.25e-3)
+
+
+@pytest.fixture(scope="module")
+def robot(datasets):
+    return ToolTipDynamics.from_table(read_modal_table(datasets / "seeds/swan_spindle_robot.csv"))
+
+
+def test_frequency_and_time_domain_agree_with_a_slow_robot_mode_and_fast_spindle_modes(robot):
+    """Seed 001 Table 4: robot modes from 7.8 Hz and spindle modes up to 6.6 kHz in one FRF."""
+    assert robot.fn_hz.min() < 10 and robot.fn_hz.max() > 3000
+    for cut, rpm in ((CUT, 10700.0), (replace(CUT, milling="up", radial_depth_m=1e-3), 6000.0), (replace(CUT, helix_rad=0.0), 2500.0)):
+        freq = sle_m(robot, cut, rpm)[0]
+        time = sle_time_domain_m(robot, cut, rpm)
+        assert freq == pytest.approx(time, rel=0.01)
+
+
+def test_quasi_static_limit(robot):
+    """At very low speed the tool simply deflects under the instantaneous force, y = G(0) F_y: the
+    SLE approaches it linearly in the speed (the first correction is the damping's phase lag)."""
+    static = sle_quasi_static_m(robot, CUT)
+    errors = [abs(sle_m(robot, CUT, rpm)[0] / static - 1) for rpm in (5.0, 1.0, 0.1)]
+    assert errors[0] > errors[1] > errors[2] and errors[2] < 5e-4
+    assert errors[1] / errors[2] > 4  # ten times slower, several times closer
+    # and a stiffer structure deflects proportionally less
+    stiff = ToolTipDynamics(robot.fn_hz, robot.zeta, robot.shapes / math.sqrt(10))
+    assert sle_quasi_static_m(stiff, CUT) == pytest.approx(sle_quasi_static_m(robot, CUT) / 10, rel=1e-12)
+
+
+def test_converges_in_harmonics_and_slices(robot):
+    by_harmonics = [sle_m(robot, CUT, 10700.0, harmonics=h)[0] for h in (25, 50, 100, 200)]
+    assert abs(by_harmonics[-1] - by_harmonics[-2]) < 1e-3 * abs(by_harmonics[-1])
+    by_slices = [sle_m(robot, CUT, 10700.0, slices=s)[0] for s in (5, 10, 20, 40, 80)]
+    changes = np.abs(np.diff(by_slices))
+    assert changes[-1] < 0.3 * changes[0] and changes[-1] < 2e-3 * abs(by_slices[-1])
+
+
+def test_compensation_converges_in_a_few_steps(robot):
+    history = compensate(robot, CUT, 10700.0, tolerance_m=2e-6, offset_m=32e-6)
+    assert 2 <= len(history) <= 5 and abs(history[-1][2]) < 2e-6
+    assert history[-1][0] > CUT.radial_depth_m  # deeper command to make up for the undercut
+
+
+def test_seed001_conditions_robot_versus_machine_tool(datasets, capsys):
+    """Seed 001 Table 7 with the modes of Tables 4-6 (robot + fixture summed, machine tool alone;
+    x and y square sides): reported for every condition. Independent facts checked: the robot's
+    SLE is an order of magnitude above the machine tool's (the seed's Figs. 10 and 12), and
+    twice the feed roughly doubles it (the force is linear in the feed)."""
+    tables = {name: read_modal_table(datasets / f"seeds/swan_{name}.csv") for name in ("spindle_robot", "fixture", "machine_tool")}
+    robot = combine(ToolTipDynamics.from_table(tables["spindle_robot"]), ToolTipDynamics.from_table(tables["fixture"]))
+    machine = ToolTipDynamics.from_table(tables["machine_tool"])
+    rows = []
+    for rpm in (10700.0, 10950.0):
+        for depth in (1.5e-3, 2.5e-3):
+            for feed in (0.125e-3, 0.25e-3):
+                cut = replace(CUT, axial_depth_m=depth, feed_per_tooth_m=feed)
+                values = {}
+                for name, dyn in (("robot", robot), ("machine", machine)):
+                    for side, turn in (("y", 0.0), ("x", -math.pi / 2)):
+                        values[f"{name}_{side}"] = sle_m(dyn.rotated(turn), cut, rpm)[0] * 1e6
+                rows.append((rpm, depth * 1e3, feed * 1e3, values))
+    for row in rows:
+        print("seed 001 condition rpm %g, b %.1f mm, ft %.3f mm:" % row[:3], {k: round(v, 2) for k, v in row[3].items()})
+    for _, _, _, v in rows:
+        assert abs(v["robot_x"]) > 10 * abs(v["machine_x"]) and abs(v["robot_y"]) > 10 * abs(v["machine_y"])
+    assert rows[1][3]["robot_y"] == pytest.approx(2 * rows[0][3]["robot_y"], rel=0.05)
+
+
+def test_sle_cli_contract(datasets):
+    args = ["--modes", datasets / "seeds/swan_spindle_robot.csv", "--direction", "y", "--teeth", 3, "--kt-mpa", 597.3, "--kn-mpa", 59.8,
+            "--tool-diameter-mm", 12.7, "--helix-deg", 40, "--radial-depth-mm", 2, "--axial-depth-mm", 2.5, "--feed-per-tooth-mm", 0.25, "--milling", "down"]
+
+    def run(*extra):
+        result = subprocess.run([sys.executable, "-m", "posedyn", "sle", *map(str, extra), *map(str, args), "--json"], capture_output=True, text=True)
+        assert result.returncode == 0, result.stderr
+        return json.loads(result.stdout)
+
+    assert set(run("--rpm", 10700)) == {"sle_um"}
+    sweep = run("--rpm-min", 10000, "--rpm-max", 11000, "--rpm-steps", 5)
+    assert set(sweep) == {"rpm", "sle_um"} and len(sweep["sle_um"]) == 5
+    steps = run("compensate", "--rpm", 10700, "--tolerance-um", 2)["iterations"]
+    assert set(steps[0]) == {"radial_depth_mm", "sle_um", "part_error_um"} and abs(steps[-1]["part_error_um"]) < 2
