@@ -40,12 +40,15 @@ def with_absorber(dyn: ToolTipDynamics, mass_kg: float, k_n_per_m: float, zeta: 
     c_a = 2.0 * zeta * math.sqrt(k_n_per_m * mass_kg)
     root = math.sqrt(mass_kg)
     for j, d in enumerate(directions):
-        phi = dyn.shapes.T @ AXES[d]
+        left, right = dyn.shapes.T @ AXES[d], dyn.force_shapes.T @ AXES[d]  # tool-tip motion, force entry
         a = n + j
         for M, value in ((K, k_n_per_m), (C, c_a)):
-            M[:n, :n] += value * np.outer(phi, phi)
-            M[:n, a] -= value * phi / root
-            M[a, :n] -= value * phi / root
+            M[:n, :n] += value * np.outer(right, left)
+            M[:n, a] -= value * right / root
+            M[a, :n] -= value * left / root
             M[a, a] += value / mass_kg
-    shapes = np.hstack([dyn.shapes, np.zeros((2, extra))])
-    return ToolTipDynamics.from_matrices(K, C, shapes)
+    pad = np.zeros((2, extra))
+    built = ToolTipDynamics.from_matrices(K, C, np.hstack([dyn.shapes, pad]))
+    if dyn.shapes_force is None:
+        return built
+    return ToolTipDynamics(built.fn_hz, built.zeta, built.shapes, built.coupling, np.hstack([dyn.force_shapes, pad]))

@@ -31,6 +31,7 @@ class ToolTipDynamics:
     zeta: np.ndarray
     shapes: np.ndarray
     coupling: tuple | None = None
+    shapes_force: np.ndarray | None = None  # force-side (right) shapes where they differ (non-symmetric coupling)
 
     def __post_init__(self):
         fn = np.array(self.fn_hz, dtype=float).reshape(-1)
@@ -47,6 +48,12 @@ class ToolTipDynamics:
         for name, value in (("fn_hz", fn), ("zeta", zeta), ("shapes", shapes)):
             value.setflags(write=False)
             object.__setattr__(self, name, value)
+        if self.shapes_force is not None:
+            right = np.array(self.shapes_force, dtype=float).reshape(shapes.shape)
+            if not np.all(np.isfinite(right)):
+                raise InputError("finite force-side mode shapes", column="shapes_force")
+            right.setflags(write=False)
+            object.__setattr__(self, "shapes_force", right)
         if self.coupling is not None:
             K, C = (np.array(a, dtype=float) for a in self.coupling)
             if K.shape != (len(fn), len(fn)) or C.shape != K.shape:
@@ -59,6 +66,12 @@ class ToolTipDynamics:
         K, C = np.asarray(K, dtype=float), np.asarray(C, dtype=float)
         wn = np.sqrt(np.diag(K))
         return cls(fn_hz=wn / (2 * np.pi), zeta=np.diag(C) / (2 * wn), shapes=shapes, coupling=(K, C))
+
+    @property
+    def force_shapes(self) -> np.ndarray:
+        """Phi_R: how a tool-tip force drives each coordinate (Phi_R^T F); equal to `shapes` for a
+        symmetric structure."""
+        return self.shapes if self.shapes_force is None else self.shapes_force
 
     @property
     def stiffness_matrix(self) -> np.ndarray:
@@ -84,15 +97,48 @@ class ToolTipDynamics:
 
     @classmethod
     def from_table(cls, table: ModalTable, pose_id: str | None = None) -> "ToolTipDynamics":
-        """The x and y modes of one pose of a modal table (z modes play no part in the 2-D cut)."""
+        """The x and y modes of one pose of a modal table (z modes play no part in the 2-D cut).
+
+        A mode number whose x row carries k_xy and whose y row carries k_yx is one coupled mode:
+        with w its angular frequency (mean of the two rows) and the displacement-side (left) and
+        force-side (right) shapes phi_L, phi_R, H_ab = phi_La phi_Rb / (w^2 - ...), so
+        phi_Lx = phi_Rx = w / sqrt(k_x), phi_Ry = w^2 / (k_xy phi_Lx), phi_Ly = w^2 / (k_yx phi_Rx)
+        (the y direct term then follows from the three others, exactly for a rank-one mode)."""
         if pose_id is None:
             if len(table.poses) != 1:
                 raise InputError("a pose_id (the table has several poses)", got=list(table.poses.pose_id)[:5], column="pose_id")
             pose_id = table.poses.pose_id[0]
-        x, y = table.modes(pose_id, "x"), table.modes(pose_id, "y")
-        if not x and not y:
+        p = table.poses.index(pose_id)
+        rows = {(d, int(m)): i for i, (q, d, m) in enumerate(zip(table.pose_index, table.direction, table.mode)) if q == p and d in ("x", "y")}
+        if not rows:
             raise InputError(f"x or y modes for pose '{pose_id}'", got="none", column="direction")
-        return cls.from_modes(x, y)
+        kxy, kyx = table.cross.get("k_xy_n_per_m"), table.cross.get("k_yx_n_per_m")
+        fn, zeta, left, right = [], [], [], []
+        done = set()
+        for (d, m), i in sorted(rows.items(), key=lambda item: (item[0][1], item[0][0])):
+            if (d, m) in done:
+                continue
+            j = rows.get(("y", m)) if d == "x" else None
+            if j is not None and kxy is not None and kyx is not None and np.isfinite(kxy[i]) and np.isfinite(kyx[j]):
+                w = 2 * np.pi * 0.5 * (table.fn_hz[i] + table.fn_hz[j])
+                lx = w / np.sqrt(table.k_n_per_m[i])
+                ry = w * w / (kxy[i] * lx)
+                ly = w * w / (kyx[j] * lx)
+                fn.append(w / (2 * np.pi))
+                zeta.append(0.5 * (table.zeta[i] + table.zeta[j]))
+                left.append([lx, ly])
+                right.append([lx, ry])
+                done |= {("x", m), ("y", m)}
+                continue
+            mode = Mode(float(table.fn_hz[i]), float(table.zeta[i]), float(table.k_n_per_m[i]))
+            column = [1.0 / np.sqrt(mode.m_kg), 0.0] if d == "x" else [0.0, 1.0 / np.sqrt(mode.m_kg)]
+            fn.append(mode.fn_hz)
+            zeta.append(mode.zeta)
+            left.append(column)
+            right.append(column)
+            done.add((d, m))
+        left, right = np.array(left).T, np.array(right).T
+        return cls(fn_hz=fn, zeta=zeta, shapes=left, shapes_force=None if np.array_equal(left, right) else right)
 
     @property
     def n_modes(self) -> int:
@@ -105,7 +151,9 @@ class ToolTipDynamics:
     def rotated(self, angle_rad: float) -> "ToolTipDynamics":
         """The same structure seen in axes turned by `angle_rad` about z (feed along the new x)."""
         c, s = np.cos(angle_rad), np.sin(angle_rad)
-        return ToolTipDynamics(self.fn_hz, self.zeta, np.array([[c, s], [-s, c]]) @ self.shapes, self.coupling)
+        R = np.array([[c, s], [-s, c]])
+        right = None if self.shapes_force is None else R @ self.shapes_force
+        return ToolTipDynamics(self.fn_hz, self.zeta, R @ self.shapes, self.coupling, right)
 
     def frf(self, omega_rad_s) -> np.ndarray:
         """Receptance matrix G(i w) = Phi diag(1 / (w_r^2 - w^2 + 2 i zeta_r w_r w)) Phi^T, shape (..., 2, 2)."""
@@ -113,10 +161,10 @@ class ToolTipDynamics:
         if self.coupling is not None:
             K, C = self.coupling
             dynamic = K - (w[..., None] ** 2) * np.eye(len(K)) + 1j * w[..., None] * C
-            return self.shapes @ np.linalg.solve(dynamic, np.broadcast_to(self.shapes.T, dynamic.shape[:-1] + (2,)))
+            return self.shapes @ np.linalg.solve(dynamic, np.broadcast_to(self.force_shapes.T, dynamic.shape[:-1] + (2,)))
         wn = self.wn_rad_s
         modal = 1.0 / (wn**2 - w**2 + 2j * self.zeta * wn * w)
-        return np.einsum("ir,...r,jr->...ij", self.shapes, modal, self.shapes)
+        return np.einsum("ir,...r,jr->...ij", self.shapes, modal, self.force_shapes)
 
 
 def combine(*parts: ToolTipDynamics) -> ToolTipDynamics:

@@ -41,6 +41,7 @@ from posedyn.table import DIRECTIONS, JOINT_COLUMNS, ModalTable, PoseSet
 
 METHODS = ("stgp", "mtgp", "physics")
 PARAMS = ("fn_hz", "zeta", "k_n_per_m")
+CROSS = ("k_xy_n_per_m", "k_yx_n_per_m")  # signed: learned as compliance 1 / k in linear space
 
 
 def target_name(direction: str, mode: int, param: str) -> str:
@@ -69,14 +70,27 @@ def table_targets(table: ModalTable) -> tuple[list[str], np.ndarray]:
     keys = sorted(keys or (), key=lambda k: (DIRECTIONS.index(k[0]), k[1]))
     if not keys:
         raise InputError("at least one (direction, mode) measured at every pose", got="none in common", column="mode")
-    names, Y = [], np.empty((n, 3 * len(keys)))
+    names, columns = [], []
     lookup = {(int(table.pose_index[i]), table.direction[i], int(table.mode[i])): i for i in range(len(table))}
-    for j, (d, m) in enumerate(keys):
-        for a, param in enumerate(PARAMS):
+    for d, m in keys:
+        for param in PARAMS:
             names.append(target_name(d, m, param))
             column = getattr(table, param)
-            Y[:, 3 * j + a] = [column[lookup[(p, d, m)]] for p in range(n)]
-    return names, Y
+            columns.append([column[lookup[(p, d, m)]] for p in range(n)])
+        for param in CROSS:
+            if param in table.cross:
+                values = np.array([table.cross[param][lookup[(p, d, m)]] for p in range(n)])
+                if np.all(np.isfinite(values)):
+                    names.append(target_name(d, m, param))
+                    columns.append(values)
+    return names, np.array(columns).T
+
+
+def to_model_space(names: list[str], Y: np.ndarray) -> np.ndarray:
+    """ln(value) for the positive parameters, compliance 1 / k for the signed cross stiffnesses."""
+    cross = np.array([parse_target(t)[2] in CROSS for t in names], dtype=bool)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(cross[None, :], 1.0 / Y, np.log(np.abs(Y)))
 
 
 def select_features(poses: PoseSet, requested: list[str] | None) -> list[str]:
@@ -170,7 +184,7 @@ def _twin_log_values(robot, params, q: np.ndarray, targets: list[str], robot_mod
         modes = twin_modes(robot, qi, params, data)
         rows = {d: direction_rows(modes, d, robot_modes) for d in DIRECTIONS}
         for j, (d, m, param) in enumerate(parsed):
-            if m <= len(rows[d]):
+            if m <= len(rows[d]) and param in PARAMS:
                 out[i, j] = np.log(rows[d][m - 1][PARAMS.index(param)])
     return out
 
@@ -215,7 +229,8 @@ class PoseModel:
         self.x_mean_ = X.mean(axis=0)
         self.x_scale_ = np.where(X.std(axis=0) > 0, X.std(axis=0), 1.0)
         self.targets_, Y = table_targets(table)
-        logY = np.log(Y)
+        self.cross_ = np.array([parse_target(t)[2] in CROSS for t in self.targets_], dtype=bool)
+        logY = to_model_space(self.targets_, Y)
         self.physics_ = None
         prior = np.zeros_like(logY)
         if self.method == "physics":
@@ -244,7 +259,7 @@ class PoseModel:
             q = pose_joints(robot, poses)
         except InputError as exc:
             return np.zeros_like(logY), {"used": False, "reason": str(exc)}
-        fit_cols = [j for j, t in enumerate(self.targets_) if parse_target(t)[2] != "zeta"]
+        fit_cols = [j for j, t in enumerate(self.targets_) if parse_target(t)[2] in ("fn_hz", "k_n_per_m")]
 
         def residual(log_scale):
             twin = _twin_log_values(robot, params.scaled(np.exp(log_scale)), q, [self.targets_[j] for j in fit_cols], count)
@@ -255,7 +270,7 @@ class PoseModel:
         scales = np.exp(result.x)
         prior_model = PhysicsPrior(robot, params, scales, count)
         prior = _twin_log_values(robot, params.scaled(scales), q, self.targets_, count)
-        has = np.isfinite(prior).all(axis=0)
+        has = np.isfinite(prior).all(axis=0) & ~self.cross_
         prior[:, ~has] = 0.0
         self.prior_targets_ = has
         self._prior = prior_model
@@ -279,12 +294,16 @@ class PoseModel:
         return mean, std
 
     def predict(self, poses: PoseSet, return_std: bool = False):
-        """Log-normal mean (and std) of every target at every pose, original units, (n, T)."""
+        """Mean (and std) of every target at every pose, original units, (n, T): log-normal
+        moments for the positive parameters; for a cross stiffness k = 1 / c with c normal,
+        1 / mu and s / mu^2 (first order)."""
         mu, s = self.predict_log(poses)
-        mean = np.exp(mu + 0.5 * s**2)
+        cross = getattr(self, "cross_", np.zeros(len(self.targets_), dtype=bool))
+        mean = np.where(cross, 1.0 / np.where(mu != 0, mu, np.inf), np.exp(mu + 0.5 * s**2))
         if not return_std:
             return mean
-        return mean, mean * np.sqrt(np.expm1(s**2))
+        std = np.where(cross, s / np.where(mu != 0, mu, np.inf) ** 2, mean * np.sqrt(np.expm1(s**2)))
+        return mean, std
 
     def predict_table(self, poses: PoseSet) -> ModalTable:
         """Predictions as a modal table (std_* columns hold the predictive std)."""
@@ -297,6 +316,8 @@ class PoseModel:
         rows = {k: [] for k in ("pose_index", "direction", "mode", "fn_hz", "zeta", "k_n_per_m")}
         stds = {"std_fn_hz": [], "std_zeta": [], "std_k_n_per_m": []}
         index = {t: j for j, t in enumerate(self.targets_)}
+        cross_names = [c for c in CROSS if any(t.endswith("." + c) for t in self.targets_)]
+        cross = {c: [] for c in cross_names}
         for p in range(len(poses)):
             for d, m in keys:
                 rows["pose_index"].append(p)
@@ -309,7 +330,10 @@ class PoseModel:
                         value = min(value, 0.999)
                     rows[param].append(value)
                     stds["std_" + param].append(std[p, j])
-        return ModalTable(poses=poses, std=stds, source=("predicted by posedyn " + self.method,) * len(rows["fn_hz"]), **rows)
+                for c in cross_names:
+                    j = index.get(target_name(d, m, c))
+                    cross[c].append(mean[p, j] if j is not None else np.nan)
+        return ModalTable(poses=poses, std=stds, source=("predicted by posedyn " + self.method,) * len(rows["fn_hz"]), cross=cross, **rows)
 
 
 def r2_score(predicted: np.ndarray, actual: np.ndarray) -> float:

@@ -24,6 +24,11 @@ POSITION_COLUMNS = ("x_mm", "y_mm", "z_mm")
 ORIENTATION_COLUMNS = {"abc": ("a_deg", "b_deg", "c_deg"), "beta": ("beta_deg",)}
 JOINT_COLUMNS = tuple(f"q{j}_deg" for j in range(1, 7))
 STD_COLUMNS = ("std_fn_hz", "std_zeta", "std_k_n_per_m")
+#: Optional cross-coupling: on an x row, the modal stiffness of the x response to a y force of
+#: the same mode (H_xy = 1 / (k_xy (1 - r^2 + 2 i zeta r))); on a y row, k_yx. Signed; empty
+#: where a mode is not coupled. A mode number with cross terms on both its x and y rows is one
+#: physical mode seen in both directions (see ToolTipDynamics.from_table).
+CROSS_COLUMNS = ("k_xy_n_per_m", "k_yx_n_per_m")
 Orientation = Literal["abc", "beta"]
 
 
@@ -157,6 +162,7 @@ class ModalTable:
     k_n_per_m: np.ndarray
     std: dict[str, np.ndarray] = field(default_factory=dict)
     source: tuple[str, ...] | None = None
+    cross: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self):
         n = len(np.atleast_1d(self.fn_hz))
@@ -170,6 +176,14 @@ class ModalTable:
         if unknown:
             raise InputError("std columns among " + ", ".join(STD_COLUMNS), got=sorted(unknown))
         set_("std", {k: _frozen(self.std[k], float).reshape(n) for k in STD_COLUMNS if k in self.std})
+        unknown = set(self.cross) - set(CROSS_COLUMNS)
+        if unknown:
+            raise InputError("cross-coupling columns among " + ", ".join(CROSS_COLUMNS), got=sorted(unknown))
+        set_("cross", {k: _frozen(self.cross[k], float).reshape(n) for k in CROSS_COLUMNS if k in self.cross})
+        for k, v in self.cross.items():
+            bad = ~(np.isnan(v) | (np.isfinite(v) & (v != 0)))
+            if bad.any():
+                raise InputError("empty or a finite non-zero number", got=v[bad][0].item(), column=k, row=_row(bad))
         if self.source is not None:
             set_("source", tuple(str(s) for s in self.source))
             if len(self.source) != n:
@@ -205,12 +219,12 @@ class ModalTable:
         return len(self.fn_hz)
 
     def __eq__(self, other) -> bool:
-        if not isinstance(other, ModalTable) or self.poses != other.poses or set(self.std) != set(other.std):
+        if not isinstance(other, ModalTable) or self.poses != other.poses or set(self.std) != set(other.std) or set(self.cross) != set(other.cross):
             return False
         fields = ("pose_index", "direction", "mode", "fn_hz", "zeta", "k_n_per_m", "source")
         return all(_same(getattr(self, f), getattr(other, f)) for f in fields) and all(
             _same(self.std[k], other.std[k]) for k in self.std
-        )
+        ) and all(_same(self.cross[k], other.cross[k]) for k in self.cross)
 
     @property
     def wn_rad_s(self) -> np.ndarray:
@@ -260,6 +274,7 @@ class ModalTable:
             k_n_per_m=self.k_n_per_m[rows],
             std={k: v[rows] for k, v in self.std.items()},
             source=None if self.source is None else tuple(self.source[i] for i in rows),
+            cross={k: v[rows] for k, v in self.cross.items()},
         )
 
     def summary(self) -> dict:

@@ -5,7 +5,6 @@ import math
 import subprocess
 import sys
 
-import numpy as np
 import pytest
 
 from absorber.active import DVF, Actuator, ControlConfig, actuator_angle_to_gravity, gain_schedule, residue_frf

@@ -12,7 +12,7 @@ from typing import Optional
 import typer
 
 from posedyn import __version__
-from posedyn.cli import absorber, control, data, gpr, sle, stability, twin
+from posedyn.cli import absorber, control, data, fit, gpr, sle, stability, twin
 from posedyn.errors import InputError
 
 app = typer.Typer(
@@ -26,6 +26,7 @@ app.add_typer(twin.app, name="twin")
 app.add_typer(absorber.app, name="absorber")
 app.add_typer(control.app, name="control")
 app.command("schedule")(absorber.schedule)
+app.command("fit")(fit.fit)
 app.command("train")(gpr.train)
 app.command("predict")(gpr.predict)
 app.command("chatter")(stability.chatter)

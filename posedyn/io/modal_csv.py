@@ -28,6 +28,7 @@ import numpy as np
 
 from posedyn.errors import InputError
 from posedyn.table import (
+    CROSS_COLUMNS,
     DIRECTIONS,
     JOINT_COLUMNS,
     ORIENTATION_COLUMNS,
@@ -47,6 +48,7 @@ KNOWN_COLUMNS = frozenset(
     + MODE_COLUMNS
     + DYNAMIC_COLUMNS
     + STD_COLUMNS
+    + CROSS_COLUMNS
     + ("source",)
 )
 #: Relative tolerance for redundant damping/stiffness/mass columns to agree with each other.
@@ -89,7 +91,8 @@ def write_modal_table(table: ModalTable, path: str | os.PathLike) -> None:
 def format_modal_table(table: ModalTable) -> str:
     poses = table.poses
     std_columns = [c for c in STD_COLUMNS if c in table.std]
-    header = list(poses.columns) + list(MODE_COLUMNS) + ["zeta", "k_n_per_m"] + std_columns
+    cross_columns = [c for c in CROSS_COLUMNS if c in table.cross]
+    header = list(poses.columns) + list(MODE_COLUMNS) + ["zeta", "k_n_per_m"] + std_columns + cross_columns
     if table.source is not None:
         header.append("source")
     pose_numbers = poses.numeric_columns()
@@ -102,6 +105,7 @@ def format_modal_table(table: ModalTable) -> str:
         row += [table.direction[i], str(int(table.mode[i])), _num(table.fn_hz[i])]
         row += [_num(table.zeta[i]), _num(table.k_n_per_m[i])]
         row += ["" if math.isnan(table.std[c][i]) else _num(table.std[c][i]) for c in std_columns]
+        row += ["" if math.isnan(table.cross[c][i]) else _num(table.cross[c][i]) for c in cross_columns]
         if table.source is not None:
             row.append(table.source[i])
         writer.writerow(row)
@@ -193,6 +197,7 @@ class _Parser:
         if "q1_deg" in columns:
             pose_numeric += list(JOINT_COLUMNS)
         std_columns = [c for c in STD_COLUMNS if c in columns]
+        cross_columns = [c for c in CROSS_COLUMNS if c in columns]
         dynamic = [c for c in DYNAMIC_COLUMNS if c in columns]
 
         pose_ids: list[str] = []
@@ -201,6 +206,7 @@ class _Parser:
         seen_keys: dict[tuple, int] = {}
         out = {k: [] for k in ("pose_index", "direction", "mode", "fn_hz", "zeta", "k_n_per_m")}
         std = {c: [] for c in std_columns}
+        cross = {c: [] for c in cross_columns}
         source = []
         for number, line, cells in rows:
             at = dict(row=number, line=line)
@@ -242,6 +248,11 @@ class _Parser:
             out["k_n_per_m"].append(k)
             for c in std_columns:
                 std[c].append(self._number(cells, c, at, allow_empty=True, minimum=0.0))
+            for c in cross_columns:
+                value = self._number(cells, c, at, allow_empty=True)
+                if value == 0:
+                    raise InputError("empty or a non-zero modal stiffness", got=cells[c], column=c, **at)
+                cross[c].append(value)
             if "source" in columns:
                 source.append(cells["source"])
 
@@ -252,7 +263,7 @@ class _Parser:
             orientation_deg=np.array([pose_values[p][3 : 3 + len(ORIENTATION_COLUMNS[orientation])] for p in pose_ids]),
             joints_deg=np.array([pose_values[p][-6:] for p in pose_ids]) if "q1_deg" in columns else None,
         )
-        return ModalTable(poses=poses, std=std, source=tuple(source) if "source" in columns else None, **out)
+        return ModalTable(poses=poses, std=std, source=tuple(source) if "source" in columns else None, cross=cross, **out)
 
     def _number(self, cells, column, at, allow_empty=False, minimum=None) -> float:
         text = cells[column]

@@ -108,6 +108,9 @@ def load_model(folder: str | os.PathLike) -> PoseModel:
         model.features_ = list(doc["features"])
         model.x_mean_, model.x_scale_ = np.array(doc["x_mean"]), np.array(doc["x_scale"])
         model.targets_ = list(doc["targets"])
+        from posedyn.gpr import CROSS, parse_target
+
+        model.cross_ = np.array([parse_target(t)[2] in CROSS for t in model.targets_], dtype=bool)
         model.y_mean_, model.y_scale_ = np.array(doc["y_mean"]), np.array(doc["y_scale"])
         model.groups_ = [list(g) for g in doc["groups"]]
         model.X_train_, model.Z_train_ = X, Z

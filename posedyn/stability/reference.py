@@ -18,14 +18,14 @@ from posedyn.stability.cutting import Cut, interval_force_matrices
 def monodromy(dyn: ToolTipDynamics, cut: Cut, rpm: float, depth_m: float, steps: int) -> np.ndarray:
     """Psi = D_{m-1} ... D_0 for E_i = [z_i; q_{i-1}; ...; q_{i-m}], zeroth order (w_a = w_b = 1/2)."""
     n, m = dyn.n_modes, steps
-    shapes = dyn.rotated(np.deg2rad(cut.feed_angle_deg)).shapes
+    turned = dyn.rotated(np.deg2rad(cut.feed_angle_deg))
     H = interval_force_matrices(cut, m)
     dt = float(cut.tooth_period_s(rpm)) / m
     wn, zeta = dyn.wn_rad_s, dyn.zeta
     size = 2 * n + m * n
     psi = np.eye(size)
     for i in range(m):
-        W = shapes.T @ H[i] @ shapes  # Phi^T H_i Phi
+        W = turned.force_shapes.T @ H[i] @ turned.shapes  # Phi_R^T H_i Phi_L
         A = np.zeros((2 * n, 2 * n))
         A[:n, n:] = np.eye(n)
         A[n:, :n] = -np.diag(wn**2) - depth_m * W

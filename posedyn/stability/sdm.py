@@ -47,9 +47,10 @@ ORDERS = (0, 1)
 
 
 def modal_force_matrices(dyn: ToolTipDynamics, cut: Cut, steps: int) -> np.ndarray:
-    """W_i = Phi^T H_i Phi for each step (steps, n, n), in the feed-aligned axes of the cut."""
-    shapes = dyn.rotated(np.deg2rad(cut.feed_angle_deg)).shapes
-    return np.einsum("ir,sij,jq->srq", shapes, interval_force_matrices(cut, steps), shapes)
+    """W_i = Phi_R^T H_i Phi_L for each step (steps, n, n), in the feed-aligned axes of the cut
+    (Phi_L turns coordinates into tool-tip displacement, Phi_R^T tool-tip force into coordinates)."""
+    turned = dyn.rotated(np.deg2rad(cut.feed_angle_deg))
+    return np.einsum("ir,sij,jq->srq", turned.force_shapes, interval_force_matrices(cut, steps), turned.shapes)
 
 
 @dataclass(frozen=True, eq=False)

@@ -77,12 +77,13 @@ def simulate(
     tau = float(cut.tooth_period_s(rpm))
     steps = int(steps_per_delay)
     h = tau / steps
-    shapes = dyn.rotated(np.deg2rad(cut.feed_angle_deg)).shapes
+    turned = dyn.rotated(np.deg2rad(cut.feed_angle_deg))
+    shapes = turned.shapes
     n = dyn.n_modes
     omega = 2.0 * np.pi * rpm / 60.0
     # modal force matrices at t = k h / 2 over one period (H is tau-periodic)
     half_times = np.arange(2 * steps) * (h / 2.0)
-    W = np.einsum("ir,kij,jq->krq", shapes, force_matrix(cut, omega * half_times), shapes)  # (2K, n, n)
+    W = np.einsum("ir,kij,jq->krq", turned.force_shapes, force_matrix(cut, omega * half_times), shapes)  # (2K, n, n)
     aW = W[:, None] * depth[None, :, None, None]  # (2K, B, n, n)
     K, C = dyn.stiffness_matrix, dyn.damping_matrix
 

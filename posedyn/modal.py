@@ -1,0 +1,200 @@
+"""Modal identification from measured FRFs (seed 003 sections 4.1-4.2, seed 000 eq. 1).
+
+Poles: least-squares complex frequency-domain estimation (LSCF, Guillaume et al. 2003), a
+common-denominator rational model H_o = N_o(z) / D(z) in z = exp(i w dt) over one frequency
+band, solved through its reduced normal equations for the denominator; the poles of D for model
+orders 2..2N give a stabilization diagram. A pole is stable when the next lower order has one
+within 1 % in frequency and 10 % in damping; clusters of stable poles found at a third or more of
+the orders are the physical modes (median frequency and damping, their spread over the orders
+as the uncertainty). Wide bands (robot modes at 5-40 Hz and spindle modes at kHz in one FRF)
+are identified decade by decade.
+
+Residues: least-squares frequency domain (LSFD) over the whole band with all the poles fixed,
+plus lower (1 / (i w)^2) and upper (constant) residual terms per FRF. For a direct receptance a
+mode with pole lambda = -zeta w_n + i w_d and residue R has modal mass 1 / (2 w_d |R|) and
+modal stiffness k = w_n^2 / (2 w_d |R|); its uncertainty follows from the LSFD covariance.
+
+FRF matrices: the same poles for all FRFs; each mode's residue matrix (times 2 i w_d) is fitted by
+its best rank-one factor sigma u v^T (SVD): right and left mode shapes at the tool tip
+sqrt(sigma) v and sqrt(sigma) u, normalised so that their product reproduces the residues (seed
+003 eqs. 15-17); for a symmetric structure they coincide, and the x-y coupling is their product.
+Written here rather than through sdypy-EMA because that package selects poles interactively or
+by given frequencies, and the pipeline needs an automatic stabilization criterion and a
+multi-FRF common-pole fit with residue matrices.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from posedyn.errors import InputError
+
+
+@dataclass(frozen=True)
+class IdentifiedMode:
+    fn_hz: float
+    zeta: float
+    std_fn_hz: float
+    std_zeta: float
+
+
+def lscf_poles(frequency_hz: np.ndarray, H: np.ndarray, order: int) -> np.ndarray:
+    """Continuous-time poles (rad/s) of a common-denominator LSCF model of `order` for the FRFs
+    H (n_freq, n_out) on one band."""
+    f = np.asarray(frequency_hz, dtype=float)
+    H = np.asarray(H).reshape(len(f), -1)
+    dt = 1.0 / (2.0 * f[-1])
+    z = np.exp(1j * 2 * np.pi * f * dt)
+    X = z[:, None] ** np.arange(order + 1)[None, :]  # (n, order + 1)
+    R = np.real(X.conj().T @ X)
+    Rinv = np.linalg.inv(R)
+    M = np.zeros((order + 1, order + 1))
+    for o in range(H.shape[1]):
+        Y = -H[:, o : o + 1] * X
+        S = np.real(X.conj().T @ Y)
+        T = np.real(Y.conj().T @ Y)
+        M += T - S.T @ Rinv @ S
+    alpha = np.append(-np.linalg.solve(M[:order, :order], M[:order, order]), 1.0)
+    roots = np.roots(alpha[::-1])
+    lam = np.log(roots.astype(complex)) / dt
+    return lam[(lam.imag > 0) & (lam.real < 0)]
+
+
+def stable_modes(frequency_hz, H, max_order: int = 40, min_fraction: float = 0.33) -> list[IdentifiedMode]:
+    """Stabilization diagram on one band and the modes it shows (see the module docstring)."""
+    f = np.asarray(frequency_hz, dtype=float)
+    orders = list(range(2, max_order + 1, 2))
+    poles = [lscf_poles(f, H, n) for n in orders]
+    stable = []
+    for i in range(1, len(orders)):
+        for lam in poles[i]:
+            fn, z = abs(lam) / (2 * np.pi), -lam.real / abs(lam)
+            prev = poles[i - 1]
+            if len(prev) == 0:
+                continue
+            fp, zp = np.abs(prev) / (2 * np.pi), -prev.real / np.abs(prev)
+            ok = (np.abs(fp - fn) < 0.01 * fn) & (np.abs(zp - z) < 0.10 * max(z, 1e-6))
+            if ok.any() and f[0] <= fn <= f[-1] and 0 < z < 0.5:
+                stable.append((fn, z))
+    if not stable:
+        return []
+    stable.sort()
+    clusters, current = [], [stable[0]]
+    for fn, z in stable[1:]:
+        if fn - current[-1][0] < 0.005 * fn:
+            current.append((fn, z))
+        else:
+            clusters.append(current)
+            current = [(fn, z)]
+    clusters.append(current)
+    modes = []
+    for c in clusters:
+        if len(c) >= min_fraction * (len(orders) - 1):
+            fns, zs = np.array([p[0] for p in c]), np.array([p[1] for p in c])
+            modes.append(IdentifiedMode(float(np.median(fns)), float(np.median(zs)), float(fns.std(ddof=1)) if len(c) > 1 else 0.0, float(zs.std(ddof=1)) if len(c) > 1 else 0.0))
+    return modes
+
+
+def identify_poles(frequency_hz, H, fmin_hz=None, fmax_hz=None, max_order: int = 40, points_per_band: int = 1500) -> list[IdentifiedMode]:
+    """Modes over [fmin, fmax], decade by decade (each band decimated to about
+    `points_per_band` frequencies)."""
+    f = np.asarray(frequency_hz, dtype=float)
+    H = np.asarray(H).reshape(len(f), -1)
+    lo = max(fmin_hz or f[f > 0][0], f[f > 0][0])
+    hi = min(fmax_hz or f[-1], f[-1])
+    if not hi > lo:
+        raise InputError("fmin < fmax within the measured band", got=(lo, hi), column="--fmin-hz")
+    edges = [lo]
+    while edges[-1] * 10 < hi:
+        edges.append(edges[-1] * 10)
+    edges.append(hi)
+    modes: list[IdentifiedMode] = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        inside = np.flatnonzero((f >= a * 0.9) & (f <= b * 1.1))
+        if len(inside) < 20:
+            continue
+        step = max(1, len(inside) // points_per_band)
+        idx = inside[::step]
+        for m in stable_modes(f[idx], H[idx], max_order):
+            if a <= m.fn_hz <= b and all(abs(m.fn_hz - o.fn_hz) > 0.01 * m.fn_hz for o in modes):
+                modes.append(m)
+    return sorted(modes, key=lambda m: m.fn_hz)
+
+
+def lsfd(frequency_hz, H, modes: list[IdentifiedMode]):
+    """Residues R (n_modes, n_out) with fixed poles and their standard errors, plus the residual
+    terms; returns (R, std_R, reconstructed H)."""
+    f = np.asarray(frequency_hz, dtype=float)
+    H = np.asarray(H).reshape(len(f), -1)
+    s = 1j * 2 * np.pi * f
+    lam = np.array([-m.zeta * 2 * np.pi * m.fn_hz + 1j * 2 * np.pi * m.fn_hz * math.sqrt(1 - m.zeta**2) for m in modes])
+    # unknowns per FRF: Re R_r, Im R_r for every mode, lower residual, upper residual (real)
+    cols = []
+    for l in lam:
+        cols.append(1 / (s - l) + 1 / (s - l.conj()))  # multiplies Re R
+        cols.append(1j / (s - l) - 1j / (s - l.conj()))  # multiplies Im R
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lower = np.where(f > 0, 1 / s**2, 0.0)
+    cols += [lower, np.ones_like(s)]
+    A = np.column_stack(cols)
+    Ar = np.vstack([A.real, A.imag])
+    R = np.empty((len(modes), H.shape[1]), dtype=complex)
+    std = np.empty((len(modes), H.shape[1]))
+    fit = np.empty_like(H)
+    scale = np.abs(H).max(axis=0)
+    for o in range(H.shape[1]):
+        w = 1.0 / np.maximum(np.abs(H[:, o]), 1e-3 * scale[o])  # relative weighting: noise ~ |H|
+        Aw = Ar * np.concatenate([w, w])[:, None]
+        b = np.concatenate([H[:, o].real * w, H[:, o].imag * w])
+        x, *_ = np.linalg.lstsq(Aw, b, rcond=None)
+        residual = b - Aw @ x
+        dof = max(len(b) - len(x), 1)
+        cov = np.linalg.pinv(Aw.T @ Aw) * (residual @ residual / dof)
+        R[:, o] = x[0 : 2 * len(modes) : 2] + 1j * x[1 : 2 * len(modes) : 2]
+        var = np.diag(cov)
+        std[:, o] = np.sqrt(var[0 : 2 * len(modes) : 2] + var[1 : 2 * len(modes) : 2])
+        fit[:, o] = A @ x
+    return R, std, fit
+
+
+def direct_modal_parameters(frequency_hz, h, fmin_hz=None, fmax_hz=None, max_order: int = 40):
+    """fn, zeta, k (with stds) of every mode of one direct receptance; returns a list of dicts."""
+    modes = identify_poles(frequency_hz, h, fmin_hz, fmax_hz, max_order)
+    if not modes:
+        raise InputError("an FRF with at least one identifiable mode in the band", got="none found", column="frf")
+    R, std_R, _ = lsfd(frequency_hz, h, modes)
+    out = []
+    for m, r, sr in zip(modes, R[:, 0], std_R[:, 0]):
+        wn = 2 * np.pi * m.fn_hz
+        wd = wn * math.sqrt(1 - m.zeta**2)
+        k = wn**2 / (2 * wd * abs(r))
+        rel = math.hypot(sr / abs(r), 2 * m.std_fn_hz / m.fn_hz)
+        out.append({"fn_hz": m.fn_hz, "zeta": m.zeta, "k_n_per_m": k, "std_fn_hz": m.std_fn_hz, "std_zeta": m.std_zeta, "std_k_n_per_m": k * rel})
+    return out
+
+
+def matrix_modal_fit(frequency_hz, H: dict, fmin_hz=None, fmax_hz=None, max_order: int = 40):
+    """Common-pole fit of an FRF matrix {'h_xx', 'h_xy', 'h_yx', 'h_yy'} (receptances):
+    modes with right/left tool-tip shapes (x, y) in 1/sqrt(kg) and the reconstructed matrix."""
+    names = ["h_xx", "h_xy", "h_yx", "h_yy"]
+    missing = [n for n in names if n not in H]
+    if missing:
+        raise InputError("the four FRFs h_xx, h_xy, h_yx, h_yy", got=f"missing {missing}", column=missing[0])
+    stack = np.column_stack([H[n] for n in names])
+    modes = identify_poles(frequency_hz, stack, fmin_hz, fmax_hz, max_order)
+    R, _, fit = lsfd(frequency_hz, stack, modes)
+    out = []
+    for m, r in zip(modes, R):
+        wd = 2 * np.pi * m.fn_hz * math.sqrt(1 - m.zeta**2)
+        A = (r * 2j * wd).real.reshape(2, 2)  # residue matrix of a real mode: phi_out phi_in^T
+        u, sigma, vt = np.linalg.svd(A)
+        right, left = math.sqrt(sigma[0]) * vt[0], math.sqrt(sigma[0]) * u[:, 0]
+        if right @ left < 0:  # a direct term is positive: make both factors point the same way
+            left = -left
+        if right[np.argmax(np.abs(right))] < 0:
+            right, left = -right, -left
+        out.append({"fn_hz": m.fn_hz, "zeta": m.zeta, "shape_right": right.tolist(), "shape_left": left.tolist()})
+    return out, {n: fit[:, i] for i, n in enumerate(names)}

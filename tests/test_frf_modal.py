@@ -1,0 +1,176 @@
+"""FRF import (CSV, UFF) and modal identification against known modes."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from posedyn.dynamics import ToolTipDynamics
+from posedyn.errors import InputError
+from posedyn.io import read_modal_table
+from posedyn.io.frf import FRFSet, read_frf, read_frf_csv, write_frf_csv, write_frf_uff
+from posedyn.modal import direct_modal_parameters, matrix_modal_fit
+from posedyn.stability import Cut, Discretization, StabilityModel
+from posedyn.table import Mode
+
+TRUE = [(6.5, 0.04, 6e5), (18.0, 0.03, 2.5e6), (34.0, 0.05, 4e6), (700.0, 0.03, 4e7), (2600.0, 0.02, 6e7)]
+
+
+def receptance(f, modes):
+    w = 2 * np.pi * f
+    return sum(1 / (k * (1 - (w / (2 * np.pi * fn)) ** 2 + 2j * z * w / (2 * np.pi * fn))) for fn, z, k in modes)
+
+
+def noisy(h, rng, level=0.02):
+    return h + level * np.abs(h) * (rng.standard_normal(len(h)) + 1j * rng.standard_normal(len(h))) / np.sqrt(2)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_direct_frf_identification_recovers_robot_and_spindle_modes(seed):
+    """Robot modes at 5-40 Hz and spindle modes at 500-3000 Hz in one FRF, 2 % complex noise:
+    fn within 0.5 %, zeta within 10 %, modal stiffness within 5 %, and honest uncertainties."""
+    rng = np.random.default_rng(seed)
+    f = np.arange(0.5, 4000.0, 0.25)
+    found = direct_modal_parameters(f, noisy(receptance(f, TRUE), rng))
+    assert len(found) == len(TRUE)
+    for (fn, zeta, k), got in zip(TRUE, found):
+        assert got["fn_hz"] == pytest.approx(fn, rel=0.005)
+        assert got["zeta"] == pytest.approx(zeta, rel=0.10)
+        assert got["k_n_per_m"] == pytest.approx(k, rel=0.05)
+        assert 0 < got["std_k_n_per_m"] < 0.05 * k
+
+
+def coupled_matrix(f, rng):
+    """Two coupled robot modes (different left and right shapes: non-symmetric coupling) and two
+    uncoupled spindle modes; mass-normalised shapes in 1/sqrt(kg)."""
+    modes = [(9.0, 0.04, [0.12, 0.08], [0.12, 0.05]), (21.0, 0.03, [0.05, -0.10], [0.05, -0.09]), (1500.0, 0.03, [0.02, 0.0], [0.02, 0.0]), (2200.0, 0.02, [0.0, 0.018], [0.0, 0.018])]
+    w = 2 * np.pi * f
+    clean, H = {}, {}
+    for a, ia in (("x", 0), ("y", 1)):
+        for b, ib in (("x", 0), ("y", 1)):
+            h = sum(L[ia] * R[ib] / ((2 * np.pi * fn) ** 2 - w**2 + 2j * z * 2 * np.pi * fn * w) for fn, z, L, R in modes)
+            clean[f"h_{a}{b}"] = h
+            H[f"h_{a}{b}"] = noisy(h, rng)
+    return modes, clean, H
+
+
+def test_frf_matrix_fit_recovers_the_cross_coupling():
+    rng = np.random.default_rng(3)
+    f = np.arange(0.5, 4000.0, 0.25)
+    modes, clean, H = coupled_matrix(f, rng)
+    found, rebuilt = matrix_modal_fit(f, H)
+    assert len(found) == 4
+    for (fn, zeta, L, R), got in zip(modes[:2], found[:2]):
+        assert got["fn_hz"] == pytest.approx(fn, rel=0.005)
+        product = np.outer(got["shape_left"], got["shape_right"])
+        assert np.allclose(product, np.outer(L, R), rtol=0.03, atol=0.002 * np.abs(np.outer(L, R)).max())
+    for name in H:  # the fitted matrix is within the 2 % noise of the true one
+        error = np.abs(rebuilt[name] - clean[name]) / np.abs(clean[name]).max()
+        assert np.percentile(error, 95) < 0.02
+
+
+def test_fit_cli_writes_a_coupled_table_that_the_stability_engine_uses(tmp_path):
+    rng = np.random.default_rng(4)
+    f = np.arange(0.5, 4000.0, 0.25)
+    modes, clean, H = coupled_matrix(f, rng)
+    frf = FRFSet(f, H, pose_id="C1", pose={"x_mm": 1500.0, "y_mm": 0.0, "z_mm": 600.0, "beta_deg": 10.0})
+    write_frf_csv(frf, tmp_path / "c1.csv")
+    result = subprocess.run([sys.executable, "-m", "posedyn", "fit", tmp_path / "c1.csv", "--out", tmp_path / "modes.csv", "--modes", "2", "--plot", tmp_path / "plots", "--json"], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)["coupled"] is True
+    assert (tmp_path / "plots/C1.png").read_bytes()[:4] == b"\x89PNG"
+    table = read_modal_table(tmp_path / "modes.csv")
+    assert set(table.cross) == {"k_xy_n_per_m", "k_yx_n_per_m"}
+    dyn = ToolTipDynamics.from_table(table, "C1")
+    truth = ToolTipDynamics(fn_hz=[m[0] for m in modes[:2]], zeta=[m[1] for m in modes[:2]], shapes=np.array([m[2] for m in modes[:2]]).T, shapes_force=np.array([m[3] for m in modes[:2]]).T)
+    omega = 2 * np.pi * np.linspace(5, 30, 200)
+    assert np.allclose(dyn.frf(omega), truth.frf(omega), rtol=0.05, atol=0.03 * np.abs(truth.frf(omega)).max())
+    cut = Cut(teeth=3, kt_pa=796e6, kn_pa=169e6, radial_immersion=0.5)
+    a = StabilityModel(dyn, cut, Discretization(40)).critical_depths([2000.0]).depth_m[0]
+    b = StabilityModel(truth, cut, Discretization(40)).critical_depths([2000.0]).depth_m[0]
+    assert a == pytest.approx(b, rel=0.03)
+
+
+def test_stability_from_fitted_modes_matches_the_true_modes_at_seed004_position5(datasets):
+    """Seed 004 position 5 (19.06 Hz, 1.06 MN/m, 725 Ns/m) plus a spindle mode: FRFs with 2 %
+    noise, fitted, then the critical depth at 2000 rpm (3 teeth, Kt 796, Kn 169 MPa, immersion
+    0.5) from the fitted modes is within 3 % of the one from the true modes."""
+    table = read_modal_table(datasets / "seeds/hou2023_positions.csv")
+    p5 = table.modes("P5", "x")[0]
+    true = [(p5.fn_hz, p5.zeta, p5.k_n_per_m), (1450.0, 0.04, 5e7)]
+    rng = np.random.default_rng(5)
+    f = np.arange(0.5, 3000.0, 0.25)
+    fitted = {d: direct_modal_parameters(f, noisy(receptance(f, true), rng)) for d in "xy"}
+    dyn_fit = ToolTipDynamics.from_modes(*(tuple(Mode(m["fn_hz"], m["zeta"], m["k_n_per_m"]) for m in fitted[d]) for d in "xy"))
+    dyn_true = ToolTipDynamics.from_modes(*(tuple(Mode(*m) for m in true) for _ in "xy"))
+    cut = Cut(teeth=3, kt_pa=796e6, kn_pa=169e6, radial_immersion=0.5)
+    a = StabilityModel(dyn_fit, cut, Discretization(40)).critical_depths([2000.0]).depth_m[0]
+    b = StabilityModel(dyn_true, cut, Discretization(40)).critical_depths([2000.0]).depth_m[0]
+    assert a == pytest.approx(b, rel=0.03)
+
+
+def test_uff_and_csv_round_trips(tmp_path):
+    rng = np.random.default_rng(6)
+    f = np.linspace(1.0, 500.0, 400)
+    frf = FRFSet(f, {"h_xx": noisy(receptance(f, TRUE[:2]), rng), "h_yy": receptance(f, TRUE[1:3])}, pose_id="P9", pose={"x_mm": 1.5, "beta_deg": -20.0})
+    write_frf_csv(frf, tmp_path / "a.csv")
+    back = read_frf_csv(tmp_path / "a.csv")
+    assert back.pose_id == "P9" and back.pose == frf.pose
+    assert all(np.array_equal(back.frf[n], frf.frf[n]) for n in frf.frf) and np.array_equal(back.frequency_hz, f)
+    write_frf_uff(frf, tmp_path / "a.uff")
+    once = read_frf(tmp_path / "a.uff")
+    assert once.pose_id == "P9" and once.pose == frf.pose
+    for n in frf.frf:
+        assert np.allclose(once.frf[n], frf.frf[n], rtol=1e-11, atol=1e-11 * np.abs(frf.frf[n]).max())
+    write_frf_uff(once, tmp_path / "b.uff")
+    twice = read_frf(tmp_path / "b.uff")
+    assert all(np.array_equal(twice.frf[n], once.frf[n]) for n in once.frf) and np.array_equal(twice.frequency_hz, once.frequency_hz)
+    # mobility and accelerance are converted to receptance
+    for quantity in ("mobility", "accelerance"):
+        write_frf_csv(frf, tmp_path / f"{quantity}.csv", quantity=quantity)
+        assert np.allclose(read_frf_csv(tmp_path / f"{quantity}.csv").frf["h_xx"], frf.frf["h_xx"], rtol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("frequency_hz,h_xx_re,h_xx_im\n1,1e-6,0\n2,1e-6,0\n2,1e-6,0\n", "duplicated at 2 Hz"),
+        ("frequency_hz,h_xx_re,h_xx_im\n1,1e-6,0\n3,1e-6,0\n2,1e-6,0\n", "decreasing at 2 Hz"),
+        ("frequency_hz,h_xx_re\n1,1e-6\n2,1e-6\n3,1e-6\n", "both h_xx_re and h_xx_im"),
+        ("# quantity = mobility\n# unit = m/N\nfrequency_hz,h_xx_re,h_xx_im\n1,1,0\n2,1,0\n3,1,0\n", "unit m/s/N for mobility"),
+        ("frequency_hz,h_xx_re,h_xx_im\n1,1e-6,0\n2,abc,0\n3,1e-6,0\n", "row 2 (line 3), column 'h_xx_re': expected a number"),
+    ],
+)
+def test_bad_frf_files_get_clear_errors(tmp_path, text, words):
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    with pytest.raises(InputError) as info:
+        read_frf_csv(path)
+    assert words in str(info.value) and "bad.csv" in str(info.value)
+
+
+def test_pose_model_learns_cross_coupling_and_predicts_coupled_modes():
+    """Cross stiffnesses (signed) are learned as compliances 1 / k_xy in linear space and come
+    back as the k_xy / k_yx columns of the predicted table, which builds a coupled structure."""
+    from posedyn.gpr import PoseModel
+    from posedyn.table import ModalTable, PoseSet
+
+    n = 8
+    x = np.linspace(1300, 1900, n)
+    scale = 1 + 0.3 * (x - 1300) / 600
+    poses = PoseSet(tuple(f"p{i}" for i in range(n)), np.column_stack([x, np.zeros(n), np.full(n, 600.0)]), "beta", np.zeros((n, 1)))
+    rows = dict(pose_index=np.repeat(np.arange(n), 2), direction=["x", "y"] * n, mode=[1, 1] * n)
+    fn = np.repeat(12.0 / np.sqrt(scale), 2)
+    table = ModalTable(
+        poses=poses, fn_hz=fn, zeta=np.full(2 * n, 0.03), k_n_per_m=np.ravel(np.column_stack([2e6 / scale, 3e6 / scale])),
+        cross={"k_xy_n_per_m": np.ravel(np.column_stack([-4e6 / scale, np.full(n, np.nan)])), "k_yx_n_per_m": np.ravel(np.column_stack([np.full(n, np.nan), -5e6 / scale]))},
+        **rows,
+    )
+    model = PoseModel("stgp").fit(table)
+    assert "x1.k_xy_n_per_m" in model.targets_ and "y1.k_yx_n_per_m" in model.targets_
+    predicted = model.predict_table(table.poses)
+    assert np.allclose(predicted.cross["k_xy_n_per_m"][::2], -4e6 / scale, rtol=0.02)
+    dyn = ToolTipDynamics.from_table(predicted, "p3")
+    assert dyn.n_modes == 1 and dyn.frf(np.array([1.0]))[0, 0, 1].real < 0  # negative cross term
