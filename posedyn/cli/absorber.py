@@ -4,8 +4,6 @@ one `posedyn` command; the physics lives in the `absorber` package)."""
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from enum import Enum
 from pathlib import Path
 from typing import Optional
@@ -179,15 +177,9 @@ def _fmt(value):
 
 
 def _write_json(path: Path, value) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as handle:
-            json.dump(value, handle, indent=2, allow_nan=False)
-            handle.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    from posedyn.io.atomic import write_text_atomic
+
+    write_text_atomic(path, json.dumps(value, indent=2, allow_nan=False) + "\n")
 
 
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 import os
 import tempfile
 from enum import Enum
@@ -17,6 +16,7 @@ from posedyn.cli.common import Milling, console, finite_or_none, print_json
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.errors import InputError
 from posedyn.io import read_modal_table
+from posedyn.io.atomic import write_text_atomic
 from posedyn.stability import Cut, Discretization, StabilityModel
 from posedyn.stability import zoa
 
@@ -160,17 +160,8 @@ def lobes(
 
 
 def _write_csv(path: Path, rpm, depth_mm) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", newline="") as handle:
-            writer = csv.writer(handle, lineterminator="\n")
-            writer.writerow(["rpm", "critical_depth_mm"])
-            for r, d in zip(rpm, depth_mm):
-                writer.writerow([repr(float(r)), "" if d is None else repr(d)])
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    lines = ["rpm,critical_depth_mm"] + [f"{float(r)!r},{'' if d is None else repr(d)}" for r, d in zip(rpm, depth_mm)]
+    write_text_atomic(path, "\n".join(lines) + "\n")
 
 
 def _plot(path: Path, rpm, depth_mm, absolute_mm, title: str) -> None:

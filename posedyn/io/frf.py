@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from posedyn.errors import InputError
+from posedyn.io.atomic import write_text_atomic
 
 QUANTITIES = {"receptance": "m/N", "mobility": "m/s/N", "accelerance": "m/s^2/N"}
 UFF_ORDINATE = {"receptance": 8, "mobility": 11, "accelerance": 12}
@@ -177,7 +178,7 @@ def write_frf_csv(frfs: FRFSet, path: str | os.PathLike, quantity: str = "recept
             row += [repr(float(converted[n][i].real)), repr(float(converted[n][i].imag))]
         row += [repr(float(frfs.coherence[n][i])) for n in names if n in frfs.coherence]
         writer.writerow(row)
-    _atomic_write(Path(path), "\n".join(lines) + "\n" + buffer.getvalue())
+    write_text_atomic(path, "\n".join(lines) + "\n" + buffer.getvalue())
 
 
 def write_frf_uff(frfs: FRFSet, path: str | os.PathLike, quantity: str = "receptance") -> None:
@@ -244,13 +245,3 @@ def read_frf(path: str | os.PathLike) -> FRFSet:
     suffix = Path(path).suffix.lower()
     return read_frf_uff(path) if suffix in (".uff", ".unv") else read_frf_csv(path)
 
-
-def _atomic_write(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as handle:
-            handle.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise

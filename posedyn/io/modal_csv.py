@@ -21,12 +21,12 @@ import csv
 import io
 import math
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from posedyn.errors import InputError
+from posedyn.io.atomic import write_text_atomic
 from posedyn.table import (
     CROSS_COLUMNS,
     DIRECTIONS,
@@ -76,16 +76,7 @@ def parse_modal_table(data: bytes | str, name: str = "<table>") -> ModalTable:
 
 def write_modal_table(table: ModalTable, path: str | os.PathLike) -> None:
     """Write atomically (temporary file in the same folder, then rename)."""
-    path = Path(path)
-    text = format_modal_table(table)
-    fd, tmp = tempfile.mkstemp(dir=path.parent or ".", prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as handle:
-            handle.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_text_atomic(path, format_modal_table(table))
 
 
 def format_modal_table(table: ModalTable) -> str:
