@@ -273,7 +273,7 @@ class PoseModel:
         has = np.isfinite(prior).all(axis=0) & ~self.cross_
         prior[:, ~has] = 0.0
         self.prior_targets_ = has
-        self._prior = prior_model
+        self.prior_model_ = prior_model
         return prior, {"used": True, "stiffness_scales": scales.tolist(), "targets_with_prior": int(has.sum())}
 
     def _fit_group(self, group: list[int], k: int) -> GP:
@@ -289,7 +289,7 @@ class PoseModel:
         mean = mean * self.y_scale_ + self.y_mean_
         std = std * self.y_scale_
         if self.physics_ and self.physics_.get("used"):
-            prior = self._prior.log_values(poses, self.targets_)
+            prior = self.prior_model_.log_values(poses, self.targets_)
             mean = mean + np.where(self.prior_targets_, np.nan_to_num(prior), 0.0)
         return mean, std
 

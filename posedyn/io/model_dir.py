@@ -55,7 +55,7 @@ def save_model(model: PoseModel, folder: str | os.PathLike) -> None:
         if model.physics_ is not None:
             physics = dict(model.physics_)
             if physics.get("used"):
-                prior = model._prior
+                prior = model.prior_model_
                 params = prior.params
                 physics.update(
                     robot_urdf="robot.urdf",
@@ -132,7 +132,7 @@ def load_model(folder: str | os.PathLike) -> PoseModel:
                 spindle_modes={d: tuple(Mode(*m) for m in ms) for d, ms in twin["spindle_modes"].items()},
             )
             robot = Robot.from_xml((folder / model.physics_["robot_urdf"]).read_text(encoding="utf-8"), model.physics_.get("robot_name", ""))
-            model._prior = PhysicsPrior(robot, params, np.array(model.physics_["stiffness_scales"]), params.robot_modes_per_direction)
+            model.prior_model_ = PhysicsPrior(robot, params, np.array(model.physics_["stiffness_scales"]), params.robot_modes_per_direction)
             model.prior_targets_ = np.array(model.physics_["prior_targets"])
             model.twin = (robot, params)
     except (KeyError, TypeError, ValueError) as exc:
