@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import differential_evolution, minimize_scalar
 
-from posedyn.errors import InputError, check_choice, check_open_interval, check_positive
+from posedyn.errors import check_choice, check_open_interval, check_positive
 
 LAYOUTS = ("tmd", "idva-c3", "idva-c4", "idva-c5", "idva-c6")
 BOUNDS = {"gamma": (0.5, 1.5), "zeta_a": (1e-4, 1.0), "delta": (1e-3, 20.0), "eta": (0.05, 20.0)}
@@ -142,9 +142,3 @@ def absolute_limit_m(min_re_g_nondim: float, host: Host, h_mean_pa: float) -> fl
     if min_re_g_nondim >= 0:
         return math.inf
     return 1.0 / (2.0 * h_mean_pa * (-min_re_g_nondim / host.k_n_per_m))
-
-
-def check_layout(layout: str) -> str:
-    if layout not in LAYOUTS:
-        raise InputError("a layout among " + ", ".join(LAYOUTS), got=layout, column="--layout")
-    return layout

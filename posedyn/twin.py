@@ -77,12 +77,6 @@ class TwinModes:
         with np.errstate(divide="ignore"):
             return (2 * np.pi * self.fn_hz) ** 2 / u**2
 
-    def direction_modes(self, direction: str, count: int) -> tuple[Mode, ...]:
-        """The `count` lowest robot modes as seen in one direction, then the spindle modes."""
-        k = self.stiffness(direction)
-        robot = tuple(Mode(float(self.fn_hz[r]), float(self.zeta[r]), float(k[r])) for r in range(count))
-        return robot + tuple(self.spindle_modes.get(direction, ()))
-
     def dynamics(self, include_spindle: bool = True) -> ToolTipDynamics:
         """Tool-tip x-y modal model with the full (coupled) robot mode shapes."""
         fn = list(self.fn_hz)
