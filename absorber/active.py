@@ -136,7 +136,8 @@ class DVF:
         F = path(self.actuator, self.fn_act_hz, self.filters, fn_compensator_hz=self.fn_compensator_hz)
         return F(1j * omega) * np.exp(-1j * omega * self.actuator.delay_s)
 
-    def closed_loop_frf(self, gain_ns_per_m: float, omega: np.ndarray, where: str = "22") -> np.ndarray:
+    def closed_loop_frf(self, gain_ns_per_m, omega: np.ndarray, where: str = "22") -> np.ndarray:
+        """Closed-loop receptance at 22 or 11 over omega (a column of gains gives one row each)."""
         s = 1j * omega
         loop = gain_ns_per_m * s * self._path_frf(omega)
         h22 = self.h22(s)
@@ -175,42 +176,67 @@ class DVF:
             lo, hi = (mid, hi) if self.stable(mid) else (lo, mid)
         return lo
 
-    def stiffness_improvement_pct(self, gain_ns_per_m: float, fn_hz: float, where: str = "22", band: float = 0.25) -> float:
-        """Dynamic-stiffness improvement at a mode: (max |H_open| / max |H_closed| - 1) 100 over
-        fn (1 +- band)."""
-        omega = 2 * math.pi * np.linspace(fn_hz * (1 - band), fn_hz * (1 + band), 2001)
-        open_ = np.abs(self.open_loop_frf(omega, where)).max()
-        closed = np.abs(self.closed_loop_frf(gain_ns_per_m, omega, where)).max()
-        return (open_ / closed - 1.0) * 100.0
+    def nyquist_gain_limit(self, fmax_hz: float = 2000.0, points: int = 20000) -> float:
+        """The same first loss of stability from the Nyquist criterion with the exact delay: the
+        loop per unit gain L(jw) = jw F(jw) H22(jw) exp(-jw T) is open-loop stable, so the
+        smallest K that puts K L(jw) on -1 is min 1 / |L| over the phase crossovers (Im L = 0,
+        Re L < 0), located on a log grid and refined linearly. Inf when L never crosses."""
+        omega = 2 * math.pi * np.geomspace(0.05, fmax_hz, points)
+        L = 1j * omega * self._path_frf(omega) * self.h22(1j * omega)
+        i = np.flatnonzero((np.sign(L.imag[:-1]) != np.sign(L.imag[1:])) & (L.real[:-1] + L.real[1:] < 0))
+        if not len(i):
+            return math.inf
+        t = L.imag[i] / (L.imag[i] - L.imag[i + 1])
+        crossing = L.real[i] + t * (L.real[i + 1] - L.real[i])
+        return float(np.min(-1.0 / crossing))
 
-    def max_force_n(self, gain_ns_per_m: float, disturbance_n: float, fmax_hz: float = 200.0) -> float:
+    def stiffness_improvement_pct(self, gain_ns_per_m, fn_hz: float, where: str = "22", band: float = 0.25):
+        """Dynamic-stiffness improvement at a mode: (max |H_open| / max |H_closed| - 1) 100 over
+        fn (1 +- band); `gain_ns_per_m` may be an array of gains."""
+        omega = 2 * math.pi * np.linspace(fn_hz * (1 - band), fn_hz * (1 + band), 2001)
+        gains = np.atleast_1d(np.asarray(gain_ns_per_m, dtype=float))
+        open_ = np.abs(self.open_loop_frf(omega, where)).max()
+        closed = np.array([np.abs(c).max() for c in self.closed_loop_frf(gains[:, None], omega, where)])
+        out = (open_ / closed - 1.0) * 100.0
+        return float(out[0]) if np.ndim(gain_ns_per_m) == 0 else out
+
+    def max_force_n(self, gain_ns_per_m, disturbance_n: float, fmax_hz: float = 200.0):
         """Largest actuator force amplitude for a harmonic force of `disturbance_n` at location 2,
-        at any frequency up to fmax: |K s F H22 / (1 + K s F H22)| |F2| (N)."""
+        at any frequency up to fmax: |K s F H22 / (1 + K s F H22)| |F2| (N); `gain_ns_per_m` may
+        be an array of gains."""
         omega = 2 * math.pi * np.linspace(0.5, fmax_hz, 4000)
-        loop = gain_ns_per_m * 1j * omega * self._path_frf(omega) * self.h22(1j * omega)
-        return float(np.max(np.abs(loop / (1 + loop))) * disturbance_n)
+        unit = 1j * omega * self._path_frf(omega) * self.h22(1j * omega)
+        gains = np.atleast_1d(np.asarray(gain_ns_per_m, dtype=float))
+        loop = gains[:, None] * unit[None, :]
+        out = np.max(np.abs(loop / (1 + loop)), axis=1) * disturbance_n
+        return float(out[0]) if np.ndim(gain_ns_per_m) == 0 else out
 
 
 def gain_schedule(loop: DVF, fn_hz: float, disturbance_n: float, margin_db: float = 6.0) -> dict:
     """The DVF gain that maximises the dynamic-stiffness improvement of the mode at fn_hz with a
-    gain margin of at least `margin_db` and the actuator force within its limit."""
-    k_max = loop.max_stable_gain()
+    gain margin of at least `margin_db` and the actuator force within its limit. The stability
+    limit is the Nyquist one (exact delay; `DVF.max_stable_gain` finds it from the closed-loop
+    poles with a Pade delay, the independent check in the tests)."""
+    k_max = loop.nyquist_gain_limit() if loop.stable(1e-9) else 0.0
     if not math.isfinite(k_max) or k_max <= 0:
-        raise InputError("a loop that is stable at small gains", got=k_max, column="gain")
+        raise InputError("a loop that is stable at small gains and loses stability at some finite gain", got=k_max, column="gain")
     cap = k_max / 10 ** (margin_db / 20)
     gains = np.linspace(cap / 40, cap, 40)
-    feasible = [(loop.stiffness_improvement_pct(k, fn_hz), k) for k in gains if loop.max_force_n(k, disturbance_n) <= loop.actuator.force_limit_n]
-    if not feasible:
-        improvement, gain = 0.0, 0.0
+    forces = loop.max_force_n(gains, disturbance_n)
+    ok = forces <= loop.actuator.force_limit_n
+    if not ok.any():
+        improvement, gain, force = 0.0, 0.0, 0.0
     else:
-        improvement, gain = max(feasible)
+        improvements = np.where(ok, loop.stiffness_improvement_pct(gains, fn_hz), -np.inf)
+        best = int(np.argmax(improvements))
+        improvement, gain, force = float(improvements[best]), float(gains[best]), float(forces[best])
     return {
         "actuator_fn_hz": loop.fn_act_hz,
-        "dvf_gain_ns_per_m": float(gain),
+        "dvf_gain_ns_per_m": gain,
         "max_stable_gain_ns_per_m": float(k_max),
         "gain_margin_db": float(20 * math.log10(k_max / gain)) if gain > 0 else math.inf,
-        "dynamic_stiffness_gain_pct": float(improvement),
-        "max_force_n": loop.max_force_n(gain, disturbance_n) if gain > 0 else 0.0,
+        "dynamic_stiffness_gain_pct": improvement,
+        "max_force_n": force,
     }
 
 

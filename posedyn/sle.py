@@ -121,7 +121,7 @@ def sle_time_domain_m(dyn: ToolTipDynamics, cut: SleCut, rpm: float, slices: int
     dt = tau / n
     K, C = dyn.stiffness_matrix, dyn.damping_matrix
     size = len(K)
-    P, g0, g1 = _exponentials(K[None], C, np.array([dt]), order=1)
+    P, g0, g1 = _exponentials(K[None], C[None], np.array([dt]), order=1)
     P, g0, g1 = P[0], g0[0], g1[0]
     phi_y = dyn.shapes[1]
     force = normal_force(cut, omega * dt * np.arange(n + 1), slices)  # F_y at the step instants

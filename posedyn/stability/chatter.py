@@ -98,23 +98,29 @@ class StabilityModel:
         five depths from guess / guess_span to guess * guess_span instead of around the ZOA
         absolute limit (the ladder still widens when the crossing is outside)."""
         rpm = np.atleast_1d(np.asarray(rpm, dtype=float))
-        depth, depth_unstable, mu = _critical(self, rpm, rel_tol, guess_m, guess_span)
+        scale = np.full(len(rpm), self.absolute_limit_zoa_m)
+        depth, depth_unstable, mu = _critical(lambda j, d: self.multipliers(rpm[j], d), scale, rel_tol, guess_m, guess_span)
         family = [()] * len(rpm)
         dominant = np.full(len(rpm), np.nan)
         if frequencies:
             finite = np.flatnonzero(np.isfinite(depth))
             if len(finite):
                 steps = self.step_matrices(rpm[finite], depth_unstable[finite])
-                for j, (dom, fam) in zip(finite, chatter_frequencies(self.dyn, self.cut, steps, mu[finite])):
+                for j, (dom, fam) in zip(finite, chatter_frequencies(self.shapes, steps, mu[finite])):
                     dominant[j], family[j] = dom, fam
         return CriticalDepths(rpm=rpm, depth_m=depth, multiplier=mu, dominant_chatter_hz=dominant, family=tuple(family))
+
+    @property
+    def shapes(self) -> np.ndarray:
+        """Tool-tip mode shapes in the feed-aligned axes of the cut (2, n)."""
+        return self.dyn.rotated(np.deg2rad(self.cut.feed_angle_deg)).shapes
 
     def chatter_at(self, rpm, depth_m) -> "CriticalDepths":
         """Dominant multiplier and chatter frequencies at given (rpm, depth) pairs (the depth
         field holds the given depths)."""
         rpm, depth = np.broadcast_arrays(np.atleast_1d(np.asarray(rpm, dtype=float)), np.atleast_1d(np.asarray(depth_m, dtype=float)))
         mu = self.multipliers(rpm, depth)
-        pairs = chatter_frequencies(self.dyn, self.cut, self.step_matrices(rpm, depth), mu)
+        pairs = chatter_frequencies(self.shapes, self.step_matrices(rpm, depth), mu)
         return CriticalDepths(
             rpm=rpm,
             depth_m=depth,
@@ -170,20 +176,21 @@ class CriticalDepths:
     family: tuple
 
 
-def _critical(model: StabilityModel, rpm: np.ndarray, rel_tol: float, guess_m=None, guess_span: float = 2.0):
-    """Bracket and refine rho(a) = 1 at every speed; returns the critical depths, the depths just
-    on the unstable side, and the multipliers there.
+def _critical(multipliers, scale: np.ndarray, rel_tol: float, guess_m=None, guess_span: float = 2.0):
+    """Bracket and refine rho(a) = 1 for every element (a speed, or a structure at one speed);
+    `multipliers(elements, depths)` gives the dominant multiplier of broadcast (element index,
+    depth) pairs and `scale` (per element) is where the ladder starts, the ZOA absolute limit or
+    an estimate of it. Returns the critical depths, the depths just on the unstable side, and
+    the multipliers there.
 
     Bracketing walks geometric ladders of depths: the first unstable rung and the rung below it
     bound the lowest crossing on the ladder; a ladder that starts unstable is followed by one
     below it, one that stays stable by one above it (up to 10^4 times the ZOA limit: beyond
     that the cut is taken as stable at every depth)."""
-    n = len(rpm)
-    scale = model.absolute_limit_zoa_m
-    if not np.isfinite(scale) or scale <= 0:
-        scale = 1e-3
+    n = len(scale)
+    scale = np.where(np.isfinite(scale) & (scale > 0), scale, 1e-3)
     if guess_m is None:
-        ladders = [scale * 2.0 ** (np.arange(-8, 9) / 2.0)] * n
+        ladders = list(scale[:, None] * 2.0 ** (np.arange(-8, 9) / 2.0)[None])
     else:
         ladders = list(np.asarray(guess_m, dtype=float).reshape(-1, 1) * guess_span ** (np.arange(-2, 3) / 2.0)[None])
     lo = np.zeros(n)
@@ -196,7 +203,7 @@ def _critical(model: StabilityModel, rpm: np.ndarray, rel_tol: float, guess_m=No
             break
         width = max(len(ladders[j]) for j in todo)
         rows = np.array([np.pad(ladders[j], (0, width - len(ladders[j])), mode="edge") for j in todo])
-        mu = model.multipliers(rpm[todo][:, None], rows)
+        mu = multipliers(np.array(todo)[:, None], rows)
         rho = np.abs(mu)
         still = []
         for row, j in enumerate(todo):
@@ -209,7 +216,7 @@ def _critical(model: StabilityModel, rpm: np.ndarray, rel_tol: float, guess_m=No
                 hi[j], hi_mu[j] = rung[0], mu[row, 0]
                 if lo[j] > 0:  # a stable rung is already known below (from an earlier ladder)
                     continue
-                if rung[0] < 1e-9 * scale:
+                if rung[0] < 1e-9 * scale[j]:
                     lo[j] = 0.0
                     continue
                 ladders[j] = rung[0] * 2.0 ** (np.arange(-8, 0) / 2.0)
@@ -218,7 +225,7 @@ def _critical(model: StabilityModel, rpm: np.ndarray, rel_tol: float, guess_m=No
                 lo[j], lo_rho[j] = rung[-1], rho[row, -1]
                 if np.isfinite(hi[j]):
                     continue
-                if rung[-1] > 1e4 * scale:
+                if rung[-1] > 1e4 * scale[j]:
                     continue
                 ladders[j] = rung[-1] * 2.0 ** (np.arange(1, 9) / 2.0)
                 still.append(j)
@@ -238,7 +245,7 @@ def _critical(model: StabilityModel, rpm: np.ndarray, rel_tol: float, guess_m=No
         width = xh - xl
         bad = ~np.isfinite(x) | (x <= xl + 1e-3 * width) | (x >= xh - 1e-3 * width)
         x = np.where(bad, 0.5 * (xl + xh), x)
-        mu = model.multipliers(rpm[bracketed[active]], np.exp(x))
+        mu = multipliers(bracketed[active], np.exp(x))
         g = np.log(np.abs(mu))
         up = g >= 0.0
         # Illinois: when the same end moves twice, halve the other end's value
@@ -266,8 +273,9 @@ def _critical(model: StabilityModel, rpm: np.ndarray, rel_tol: float, guess_m=No
     return depth, unstable_depth, mu_out
 
 
-def chatter_frequencies(dyn: ToolTipDynamics, cut: Cut, steps: sdm.StepMatrices, mu: np.ndarray, keep: float = 0.05):
-    """(dominant_hz, ((hz, relative amplitude), ...)) per batch element of `steps` at multiplier mu.
+def chatter_frequencies(shapes: np.ndarray, steps: sdm.StepMatrices, mu: np.ndarray, keep: float = 0.05):
+    """(dominant_hz, ((hz, relative amplitude), ...)) per batch element of `steps` at multiplier mu;
+    `shapes` are the tool-tip mode shapes in the cut's axes, (2, n) or per element (B, 2, n).
 
     The Floquet eigenvector's tool-tip positions over one delay are divided by mu^(i/m) (the
     growth exp(lambda t_i)) and Fourier-analysed; members with amplitude >= `keep` times the
@@ -275,8 +283,8 @@ def chatter_frequencies(dyn: ToolTipDynamics, cut: Cut, steps: sdm.StepMatrices,
     mu = np.asarray(mu, dtype=complex).reshape(-1)
     q = sdm.floquet_positions(steps, mu)  # (m, n, B)
     m = q.shape[0]
-    shapes = dyn.rotated(np.deg2rad(cut.feed_angle_deg)).shapes
-    u = np.einsum("dr,irb->idb", shapes, q)  # tool tip (m, 2, B)
+    shapes = np.broadcast_to(shapes, (len(mu),) + np.shape(shapes)[-2:])
+    u = np.einsum("bdr,irb->idb", shapes, q)  # tool tip (m, 2, B)
     growth = mu[None, :] ** (-np.arange(m)[:, None] / m)  # exp(-lambda t_i), principal branch
     p = u * growth[:, None, :]
     c = np.fft.fft(p, axis=0) / m

@@ -179,46 +179,68 @@ class StepMatrices:
 
 
 def step_matrices(dyn: ToolTipDynamics, w_modal: np.ndarray, depth_m, dt_s, order: int = 0) -> StepMatrices:
-    """Step matrices for B (depth, dt) pairs; steps where no tooth cuts (W_i = 0) share one
-    free-vibration exponential per dt."""
+    """Step matrices of one structure for B (depth, dt) pairs."""
+    return stacked_step_matrices(dyn.stiffness_matrix, dyn.damping_matrix, w_modal, depth_m, dt_s, order)
+
+
+def stacked_step_matrices(stiffness: np.ndarray, damping: np.ndarray, w_modal: np.ndarray, depth_m, dt_s, order: int = 0, inputs: np.ndarray | None = None) -> StepMatrices:
+    """Step matrices for B (depth, dt) pairs, each with its own structure when `stiffness`,
+    `damping` (n, n) or (B, n, n) and `w_modal` (m, n, n) or (B, m, n, n) are stacked. Steps where
+    no tooth cuts (W_i = 0 for every element) share one free-vibration exponential.
+
+    `inputs` (B, m, n, r), when given, is a factor of W_i = inputs_i Phi_L (for the cut,
+    Phi_R^T H_i with r = 2): Fb and Fa then act on the delayed tool-tip displacement
+    u = Phi_L q instead of on q (r columns instead of n)."""
     if order not in ORDERS:
         raise ValueError(f"order must be 0 or 1, got {order}")
     depth_m, dt_s = np.broadcast_arrays(np.asarray(depth_m, dtype=float).reshape(-1), np.asarray(dt_s, dtype=float).reshape(-1))
-    batch, (m, n, _) = len(depth_m), w_modal.shape
-    cutting = np.any(w_modal != 0.0, axis=(1, 2))
+    batch, (m, n, _) = len(depth_m), w_modal.shape[-3:]
+    wn2 = np.broadcast_to(stiffness, (batch, n, n))
+    c = np.broadcast_to(damping, (batch, n, n))
+    w_steps = w_modal if w_modal.ndim == 3 else np.moveaxis(w_modal, 1, 0)  # (m, [B,] n, n)
+    cutting = np.any(w_steps != 0.0, axis=tuple(range(1, w_steps.ndim)))
     P = np.empty((m, 2 * n, 2 * n, batch))
-    F0 = np.zeros((m, 2 * n, n, batch))
-    F1 = np.zeros((m, 2 * n, n, batch)) if order == 1 else None
-    wn2, c = dyn.stiffness_matrix, dyn.damping_matrix
+    r = n if inputs is None else inputs.shape[-1]
+    F0 = np.zeros((m, 2 * n, r, batch))
+    F1 = np.zeros((m, 2 * n, r, batch)) if order == 1 else None
     if not cutting.all():
-        free_p, _, _ = _exponentials(np.broadcast_to(wn2, (batch, n, n)), c, dt_s, order=0)
+        free_p, _, _ = _exponentials(wn2, c, dt_s, order=0)
         P[~cutting] = free_p.transpose(1, 2, 0)[None]
     idx = np.flatnonzero(cutting)
     if len(idx):
-        aw = w_modal[idx][:, None] * depth_m[None, :, None, None]  # (k, B, n, n)
+        w_cut = w_steps[idx][:, None] if w_modal.ndim == 3 else w_steps[idx]
+        aw = w_cut * depth_m[None, :, None, None]  # (k, B, n, n)
         dt = np.broadcast_to(dt_s[None, :], aw.shape[:2]).reshape(-1)
-        p, g0, g1 = _exponentials((wn2 + aw).reshape(-1, n, n), c, dt, order)
+        stiff, damp = (wn2 + aw).reshape(-1, n, n), np.broadcast_to(c, aw.shape).reshape(-1, n, n)
         to_layout = lambda a: a.reshape(len(idx), batch, *a.shape[1:]).transpose(0, 2, 3, 1)  # noqa: E731
-        awf = aw.reshape(-1, n, n)
+        if inputs is None:  # F = int exp(A s) E ds a W_i
+            p, g0, g1 = _exponentials(stiff, damp, dt, order)
+            awf = aw.reshape(-1, n, n)
+            g0, g1 = g0 @ awf, (g1 @ awf if order == 1 else None)
+        else:  # a Phi_R^T H_i inside the augmented exponential: r columns instead of n
+            rows = (np.moveaxis(inputs, 1, 0)[idx] * depth_m[None, :, None, None]).reshape(-1, n, r)
+            p, g0, g1 = _exponentials(stiff, damp, dt, order, inputs=rows)
         P[idx] = to_layout(p)
-        F0[idx] = to_layout(g0 @ awf)
+        F0[idx] = to_layout(g0)
         if order == 1:
-            F1[idx] = to_layout(g1 @ awf)
+            F1[idx] = to_layout(g1)
     if order == 0:
         half = 0.5 * F0
         return StepMatrices(P, half, half, dt_s)
     return StepMatrices(P, F0 - F1, F1, dt_s)
 
 
-def _exponentials(stiffness: np.ndarray, damping: np.ndarray, dt: np.ndarray, order: int):
+def _exponentials(stiffness: np.ndarray, damping: np.ndarray, dt: np.ndarray, order: int, inputs: np.ndarray | None = None):
     """For A = [[0, I], [-K, -C]]: exp(A dt), int_0^dt exp(A s) E ds and int_0^dt exp(A s) E (dt - s) / dt ds
-    with E = [[0], [I]], batched over K (k, n, n) and dt (k,), from one augmented exponential."""
+    with E = [[0], [I]] (or [[0], [R]] for given `inputs` R (k, n, r)), batched over K, C (k, n, n)
+    and dt (k,), from one augmented exponential."""
     k, n, _ = stiffness.shape
-    if n == 1:
-        out = _exponentials_sdof(stiffness[:, 0, 0], damping[0, 0], dt, order)
+    if n == 1 and inputs is None:
+        out = _exponentials_sdof(stiffness[:, 0, 0], damping[:, 0, 0], dt, order)
         if out is not None:
             return out
-    size = 2 * n + n * (order + 1)
+    r = n if inputs is None else inputs.shape[-1]
+    size = 2 * n + r * (order + 1)
     # Balanced augmented matrix: positions scaled by w = sqrt(max |K|) so that every block is of
     # the order of the modal frequencies, exp(M) = S^-1 exp(S M S^-1) S with S = diag(w I, I, ...).
     w = np.sqrt(np.max(np.abs(stiffness), axis=(1, 2)))[:, None, None]
@@ -226,13 +248,13 @@ def _exponentials(stiffness: np.ndarray, damping: np.ndarray, dt: np.ndarray, or
     M[:, :n, n : 2 * n] = w * np.eye(n)
     M[:, n : 2 * n, :n] = -stiffness / w
     M[:, n : 2 * n, n : 2 * n] = -damping
-    M[:, n : 2 * n, 2 * n : 3 * n] = np.eye(n)
+    M[:, n : 2 * n, 2 * n : 2 * n + r] = np.eye(n) if inputs is None else inputs
     if order == 1:
-        M[:, 2 * n : 3 * n, 3 * n :] = np.eye(n) / dt[:, None, None]
+        M[:, 2 * n : 2 * n + r, 2 * n + r :] = np.eye(r) / dt[:, None, None]
     E = expm_batched(M * dt[:, None, None])
     E[:, :n, :] /= w
     E[:, :, :n] *= w
-    return E[:, : 2 * n, : 2 * n], E[:, : 2 * n, 2 * n : 3 * n], (E[:, : 2 * n, 3 * n :] if order == 1 else None)
+    return E[:, : 2 * n, : 2 * n], E[:, : 2 * n, 2 * n : 2 * n + r], (E[:, : 2 * n, 2 * n + r :] if order == 1 else None)
 
 
 _PADE13 = (
@@ -260,7 +282,7 @@ def expm_batched(A: np.ndarray) -> np.ndarray:
     return R
 
 
-def _exponentials_sdof(kappa: np.ndarray, c: float, dt: np.ndarray, order: int):
+def _exponentials_sdof(kappa: np.ndarray, c: np.ndarray, dt: np.ndarray, order: int):
     """Closed form for one mode, A = [[0, 1], [-kappa, -c]]:
     exp(A dt) = exp(-c dt / 2) [C(u) I + S(u) dt (A + c/2 I)],  u = dt^2 (c^2 / 4 - kappa),
     C(u) = cosh(sqrt u), S(u) = sinh(sqrt u) / sqrt u (real for either sign of u); the input
