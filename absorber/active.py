@@ -27,6 +27,7 @@ Pade approximant. Robot FRFs come in seed 000's residue form (eq. 1) or from mod
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 from dataclasses import dataclass, field
 
 import control
@@ -94,6 +95,7 @@ def modal_frf(modes) -> control.TransferFunction:
     return total
 
 
+@lru_cache(maxsize=256)
 def path(actuator: Actuator, fn_act_hz: float, filters: Filters = Filters(), pade_order: int | None = None, fn_compensator_hz: float | None = None):
     """F(s) without s K and without the delay, unless `pade_order` folds a Pade approximant of it
     in. The compensator C1 is designed for `fn_compensator_hz` (default: the actuator's own
@@ -158,6 +160,12 @@ class DVF:
         size = max(len(num), len(den))
         return np.roots(np.pad(den, (size - len(den), 0)) + np.pad(num, (size - len(num), 0)))
 
+    def open_loop_stable(self) -> bool:
+        """Every pole of the controller path and of H22 in the left half plane (the Nyquist
+        gain limit assumes it)."""
+        F = path(self.actuator, self.fn_act_hz, self.filters, None, self.fn_compensator_hz)
+        return all(np.max(np.roots(np.squeeze(tf.den[0][0])).real, initial=-np.inf) < 0 for tf in (F, self.h22))
+
     def stable(self, gain_ns_per_m: float) -> bool:
         return bool(np.max(self.poles(gain_ns_per_m).real) < 0)
 
@@ -176,7 +184,7 @@ class DVF:
             lo, hi = (mid, hi) if self.stable(mid) else (lo, mid)
         return lo
 
-    def nyquist_gain_limit(self, fmax_hz: float = 2000.0, points: int = 20000) -> float:
+    def nyquist_gain_limit(self, fmax_hz: float = 2000.0, points: int = 6000) -> float:
         """The same first loss of stability from the Nyquist criterion with the exact delay: the
         loop per unit gain L(jw) = jw F(jw) H22(jw) exp(-jw T) is open-loop stable, so the
         smallest K that puts K L(jw) on -1 is min 1 / |L| over the phase crossovers (Im L = 0,
@@ -193,7 +201,7 @@ class DVF:
     def stiffness_improvement_pct(self, gain_ns_per_m, fn_hz: float, where: str = "22", band: float = 0.25):
         """Dynamic-stiffness improvement at a mode: (max |H_open| / max |H_closed| - 1) 100 over
         fn (1 +- band); `gain_ns_per_m` may be an array of gains."""
-        omega = 2 * math.pi * np.linspace(fn_hz * (1 - band), fn_hz * (1 + band), 2001)
+        omega = 2 * math.pi * np.linspace(fn_hz * (1 - band), fn_hz * (1 + band), 801)
         gains = np.atleast_1d(np.asarray(gain_ns_per_m, dtype=float))
         open_ = np.abs(self.open_loop_frf(omega, where)).max()
         closed = np.array([np.abs(c).max() for c in self.closed_loop_frf(gains[:, None], omega, where)])
@@ -204,7 +212,7 @@ class DVF:
         """Largest actuator force amplitude for a harmonic force of `disturbance_n` at location 2,
         at any frequency up to fmax: |K s F H22 / (1 + K s F H22)| |F2| (N); `gain_ns_per_m` may
         be an array of gains."""
-        omega = 2 * math.pi * np.linspace(0.5, fmax_hz, 4000)
+        omega = 2 * math.pi * np.geomspace(0.5, fmax_hz, 1500)
         unit = 1j * omega * self._path_frf(omega) * self.h22(1j * omega)
         gains = np.atleast_1d(np.asarray(gain_ns_per_m, dtype=float))
         loop = gains[:, None] * unit[None, :]
@@ -217,7 +225,7 @@ def gain_schedule(loop: DVF, fn_hz: float, disturbance_n: float, margin_db: floa
     gain margin of at least `margin_db` and the actuator force within its limit. The stability
     limit is the Nyquist one (exact delay; `DVF.max_stable_gain` finds it from the closed-loop
     poles with a Pade delay, the independent check in the tests)."""
-    k_max = loop.nyquist_gain_limit() if loop.stable(1e-9) else 0.0
+    k_max = loop.nyquist_gain_limit() if loop.open_loop_stable() else 0.0
     if not math.isfinite(k_max) or k_max <= 0:
         raise InputError("a loop that is stable at small gains and loses stability at some finite gain", got=k_max, column="gain")
     cap = k_max / 10 ** (margin_db / 20)
@@ -263,6 +271,12 @@ def actuator_angle_to_gravity(tool_rotation: np.ndarray, mount_axis: str = "y") 
     tool rotation) and gravity (base -z)."""
     axis = np.asarray(tool_rotation, dtype=float)[:, "xyz".index(mount_axis)]
     return math.acos(min(1.0, abs(float(axis @ np.array([0.0, 0.0, -1.0])))))
+
+
+def actuator_direction(tool_rotation: np.ndarray, mount_axis: str = "y") -> str:
+    """The modal-table direction (x or y of the base) nearest the actuator's axis."""
+    axis = np.asarray(tool_rotation, dtype=float)[:, "xyz".index(mount_axis)]
+    return "x" if abs(axis[0]) >= abs(axis[1]) else "y"
 
 
 def dominant_mode(modes) -> tuple[float, float, float]:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -90,10 +91,7 @@ def sle_m(dyn: ToolTipDynamics, cut: SleCut, rpm, slices: int = 20, harmonics: i
     rpm = np.atleast_1d(np.asarray(rpm, dtype=float))
     if np.any(~np.isfinite(rpm) | (rpm <= 0)):
         raise InputError("spindle speeds > 0 rpm", got=rpm.tolist()[:3], column="rpm")
-    samples = max(8 * harmonics, 4096)
-    tooth_angle = 2 * math.pi / cut.teeth
-    phi = np.arange(samples) * tooth_angle / samples
-    coeff = np.fft.rfft(normal_force(cut, phi, slices)) / samples  # F_k, k = 0..samples/2
+    coeff = _force_series(cut, slices, harmonics)
     k = np.arange(min(harmonics, len(coeff) - 1) + 1)
     weights = np.where(k == 0, 1.0, 2.0)
     exit_phase = _exit_phases(cut, slices)  # bottom-tooth angle at each slice's surface instant
@@ -106,6 +104,17 @@ def sle_m(dyn: ToolTipDynamics, cut: SleCut, rpm, slices: int = 20, harmonics: i
         y = (phase * (weights * H * coeff[k])).real.sum(axis=1)
         out[n] = y.mean()
     return out + offset_m
+
+
+@lru_cache(maxsize=16)
+def _force_series(cut: SleCut, slices: int, harmonics: int) -> np.ndarray:
+    """Fourier coefficients F_k of the surface-normal force over one tooth period (k = 0..samples/2);
+    they depend on the cut only, so a pose sweep computes them once."""
+    samples = max(8 * harmonics, 4096)
+    phi = np.arange(samples) * (2 * math.pi / cut.teeth) / samples
+    coeff = np.fft.rfft(normal_force(cut, phi, slices)) / samples
+    coeff.flags.writeable = False
+    return coeff
 
 
 def sle_time_domain_m(dyn: ToolTipDynamics, cut: SleCut, rpm: float, slices: int = 20, steps_per_tooth: int = 2000) -> float:

@@ -50,13 +50,12 @@ def pose_rotation(poses, i: int) -> np.ndarray:
 def control_entries(table, config) -> list[dict]:
     """One control schedule entry per pose of a modal table (robot modes below 500 Hz in the
     actuator's direction: the tool frame's mounting axis in the x-y plane, nearest of x, y)."""
-    from absorber.active import control_schedule_pose
+    from absorber.active import actuator_direction, control_schedule_pose
 
     entries = []
     for p, pose_id in enumerate(table.poses.pose_id):
         R = pose_rotation(table.poses, p)
-        axis = R[:, "xyz".index(config.mount_axis)]
-        direction = "x" if abs(axis[0]) >= abs(axis[1]) else "y"
+        direction = actuator_direction(R, config.mount_axis)
         rows = [i for i in range(len(table)) if table.pose_index[i] == p and table.direction[i] == direction and table.fn_hz[i] < 500]
         if not rows:
             raise InputError(f"robot modes below 500 Hz in {direction} for pose '{pose_id}'", column="direction")

@@ -1,8 +1,11 @@
 """Cut parameter files (TOML, `kind = "cut"`): `[cut] rpm, teeth, kt_mpa, kn_mpa,
-radial_immersion, milling, feed_angle_deg` and optional `[stability] steps`."""
+radial_immersion, milling, feed_angle_deg, tool_diameter_mm`, optional `[stability] steps` and
+optional `[sle] helix_deg, axial_depth_mm, feed_per_tooth_mm` (the surface location error of
+this cut; the radial depth is radial_immersion x tool_diameter_mm)."""
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -29,3 +32,26 @@ def read_cut(path: str | os.PathLike) -> tuple[Cut, float, int]:
     if not rpm > 0:
         raise InputError("rpm > 0", got=rpm, column="rpm", file=str(Path(path)))
     return cut, rpm, steps
+
+
+def read_sle_cut(path: str | os.PathLike):
+    """The SLE cut of a cut file's `[sle]` section (None when the file has none)."""
+    from posedyn.sle import SleCut
+
+    p = read_params(path)
+    if "sle" not in p:
+        return None
+    with reading(path, "cut file"):
+        c, s = p["cut"], p["sle"]
+        diameter = float(c["tool_diameter_mm"]) * 1e-3
+        return SleCut(
+            teeth=int(c["teeth"]),
+            kt_pa=float(c["kt_mpa"]) * 1e6,
+            kn_pa=float(c["kn_mpa"]) * 1e6,
+            tool_diameter_m=diameter,
+            helix_rad=math.radians(float(s["helix_deg"])),
+            radial_depth_m=float(c["radial_immersion"]) * diameter,
+            axial_depth_m=float(s["axial_depth_mm"]) * 1e-3,
+            feed_per_tooth_m=float(s["feed_per_tooth_mm"]) * 1e-3,
+            milling=c.get("milling", "down"),
+        )

@@ -176,7 +176,7 @@ class CriticalDepths:
     family: tuple
 
 
-def _critical(multipliers, scale: np.ndarray, rel_tol: float, guess_m=None, guess_span: float = 2.0):
+def _critical(multipliers, scale: np.ndarray, rel_tol: float, guess_m=None, guess_span: float = 2.0, rungs: int | None = None):
     """Bracket and refine rho(a) = 1 for every element (a speed, or a structure at one speed);
     `multipliers(elements, depths)` gives the dominant multiplier of broadcast (element index,
     depth) pairs and `scale` (per element) is where the ladder starts, the ZOA absolute limit or
@@ -186,10 +186,17 @@ def _critical(multipliers, scale: np.ndarray, rel_tol: float, guess_m=None, gues
     Bracketing walks geometric ladders of depths: the first unstable rung and the rung below it
     bound the lowest crossing on the ladder; a ladder that starts unstable is followed by one
     below it, one that stays stable by one above it (up to 10^4 times the ZOA limit: beyond
-    that the cut is taken as stable at every depth)."""
+    that the cut is taken as stable at every depth). With `rungs`, every ladder has that many
+    rungs a factor sqrt(2) apart, the first one ending at the guess (short ladders walked in
+    more rounds: fewer evaluations when the guess is good, as in a pose sweep)."""
     n = len(scale)
     scale = np.where(np.isfinite(scale) & (scale > 0), scale, 1e-3)
-    if guess_m is None:
+    below, above = np.arange(-8, 0) / 2.0, np.arange(1, 9) / 2.0
+    if rungs is not None:
+        start = np.asarray(scale if guess_m is None else guess_m, dtype=float).reshape(-1, 1)
+        ladders = list(start * 2.0 ** (np.arange(1 - rungs, 1) / 2.0)[None])
+        below, above = np.arange(-rungs, 0) / 2.0, np.arange(1, rungs + 1) / 2.0
+    elif guess_m is None:
         ladders = list(scale[:, None] * 2.0 ** (np.arange(-8, 9) / 2.0)[None])
     else:
         ladders = list(np.asarray(guess_m, dtype=float).reshape(-1, 1) * guess_span ** (np.arange(-2, 3) / 2.0)[None])
@@ -198,7 +205,7 @@ def _critical(multipliers, scale: np.ndarray, rel_tol: float, guess_m=None, gues
     hi = np.full(n, np.inf)
     hi_mu = np.full(n, np.nan + 0j)
     todo = list(range(n))
-    for _ in range(12):
+    for _ in range(12 if rungs is None else max(12, 96 // rungs)):
         if not todo:
             break
         width = max(len(ladders[j]) for j in todo)
@@ -219,7 +226,7 @@ def _critical(multipliers, scale: np.ndarray, rel_tol: float, guess_m=None, gues
                 if rung[0] < 1e-9 * scale[j]:
                     lo[j] = 0.0
                     continue
-                ladders[j] = rung[0] * 2.0 ** (np.arange(-8, 0) / 2.0)
+                ladders[j] = rung[0] * 2.0**below
                 still.append(j)
             else:  # stable on every rung: look above
                 lo[j], lo_rho[j] = rung[-1], rho[row, -1]
@@ -227,7 +234,7 @@ def _critical(multipliers, scale: np.ndarray, rel_tol: float, guess_m=None, gues
                     continue
                 if rung[-1] > 1e4 * scale[j]:
                     continue
-                ladders[j] = rung[-1] * 2.0 ** (np.arange(1, 9) / 2.0)
+                ladders[j] = rung[-1] * 2.0**above
                 still.append(j)
         todo = still
     bracketed = np.flatnonzero((lo > 0) & np.isfinite(hi))

@@ -1,0 +1,71 @@
+"""Sweep benchmark: 10,000 twin poses through the whole chain (modes, critical depth with and
+without the absorber, chatter frequency, field, current, DVF gain, SLE) on a local Dask cluster
+with the default settings, and the speedup from 1 to 2 workers on 2,000 poses.
+
+Target (issue 9): 10,000 poses <= 120 s on 2 cores. Prints figures only.
+
+    .venv/bin/python bench/sweep.py [--poses 10000] [--speedup-poses 2000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from service.sweep import SweepSpec
+from service.sweep_run import run_sweep
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def grid_file(folder: Path, poses: int) -> Path:
+    """A seed 003-style grid (x 1300-1900 mm, y -300-300 mm, z 600 mm, beta -60-60 deg) with
+    about `poses` poses: 25 x 25 positions times poses / 625 angles."""
+    angles = max(1, round(poses / 625))
+    text = (
+        '[meta]\nkind = "pose_grid"\nsource = "bench"\n\n[grid]\n'
+        f"x_mm = {np.linspace(1300, 1900, 25).round(3).tolist()}\n"
+        f"y_mm = {np.linspace(-300, 300, 25).round(3).tolist()}\n"
+        "z_mm = [600]\n"
+        f"beta_deg = {np.linspace(-60, 60, angles).round(3).tolist()}\n"
+    )
+    path = folder / f"grid_{poses}.toml"
+    path.write_text(text)
+    return path
+
+
+def run(grid: Path, out: Path, workers: int) -> float:
+    spec = SweepSpec(
+        poses=str(grid),
+        cut=str(ROOT / "datasets/cuts/sweep_demo_cut.toml"),
+        twin=str(ROOT / "datasets/robots/kr_r2700_twin.toml"),
+    )
+    outcome = run_sweep(spec, out, workers=workers)
+    reachable = sum(1 for r in outcome.rows if r["reachable"])
+    print(f"  {len(outcome.rows)} poses ({reachable} reachable), {workers} worker(s): {outcome.seconds:.1f} s ({outcome.seconds / len(outcome.rows) * 1e3:.1f} ms per pose)")
+    return outcome.seconds
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--poses", type=int, default=10_000)
+    parser.add_argument("--speedup-poses", type=int, default=2_000)
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        print(f"sweep of {args.poses} poses, default settings, 2 local workers (target <= 120 s):")
+        total = run(grid_file(tmp, args.poses), tmp / "big", 2)
+        print(f"  ratio to the 120 s target: {total / 120:.2f}")
+        print(f"speedup on {args.speedup_poses} poses (same run, same machine):")
+        small = grid_file(tmp, args.speedup_poses)
+        one = run(small, tmp / "one", 1)
+        two = run(small, tmp / "two", 2)
+        print(f"  1 -> 2 workers: {one / two:.2f}x")
+
+
+if __name__ == "__main__":
+    main()
