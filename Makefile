@@ -35,6 +35,12 @@ demo: $(STAMP)
 	@echo "Chatter at the far pose from the predicted modes (spindle 10,700 rpm, 3-flute 12.7 mm end mill, Al)"
 	$(BIN)/posedyn chatter --modes build/demo/predicted.csv --pose-id far --rpm 10700 --teeth 3 \
 		--kt-mpa 597.3 --kn-mpa 59.8 --radial-immersion 0.16 --milling down
+	@echo
+	@echo "Sweep the seed 003 workspace (112 poses) with the trained model on 2 Dask workers: maps, lobes, worst poses"
+	rm -rf build/demo/sweep
+	$(BIN)/posedyn sweep build/demo/model --grid datasets/campaigns/seed003_grid.toml \
+		--cut datasets/cuts/sweep_demo_cut.toml --out build/demo/sweep --workers 2 --chunk-size 28
+	@echo "open build/demo/sweep/report.html in a browser"
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

@@ -413,7 +413,7 @@ def representative_lobes(spec_json: str, poses, rows: list[dict], grid_twin: str
         curves = []
         for dyn in (found[i].dyn, coupled(found[i].dyn, ctx.schedule, field_t)):
             batch = BatchStability([dyn] * speeds, ctx.schedule.cut, rpm, disc)
-            depth = batch.critical_depths(frequencies=False, rel_tol=1e-3).depth_m * 1e3
+            depth = batch.critical_depths(frequencies=False, rel_tol=1e-3, guess_m=7.0 * batch.scale_m, rungs=2).depth_m * 1e3
             curves.append([float(d) if np.isfinite(d) else None for d in depth])
         out.append({"label": label, "pose_id": poses.pose_id[i], "rpm": rpm.tolist(), "depth_mm": curves[0], "depth_with_absorber_mm": curves[1], "field_mt": rows[i]["field_mt"], "cut_rpm": ctx.rpm})
     return out
