@@ -346,3 +346,29 @@ def control_schedule_pose(pose_id: str, modes, tool_rotation: np.ndarray, config
     entry["force_limit_n"] = config.actuator.force_limit_n
     entry["virtual_absorber"] = virtual_absorber(host, config)
     return entry
+
+
+def pose_rotation(poses, i: int) -> np.ndarray:
+    """The tool rotation (base frame) of pose i of a PoseSet."""
+    from posedyn.robot import rotation_from_abc, rotation_from_beta
+
+    if poses.orientation == "beta":
+        return rotation_from_beta(math.radians(poses.orientation_deg[i, 0]))
+    return rotation_from_abc(*np.radians(poses.orientation_deg[i]))
+
+
+def control_entries(table, config) -> list[dict]:
+    """One control schedule entry per pose of a modal table (robot modes below 500 Hz in the
+    actuator's direction: the tool frame's mounting axis in the x-y plane, nearest of x, y)."""
+    entries = []
+    for p, pose_id in enumerate(table.poses.pose_id):
+        R = pose_rotation(table.poses, p)
+        direction = actuator_direction(R, config.mount_axis)
+        rows = [i for i in range(len(table)) if table.pose_index[i] == p and table.direction[i] == direction and table.fn_hz[i] < 500]
+        if not rows:
+            raise InputError(f"robot modes below 500 Hz in {direction} for pose '{pose_id}'", column="direction")
+        modes = [(float(table.fn_hz[i]), float(table.zeta[i]), float(table.k_n_per_m[i])) for i in rows]
+        entry = control_schedule_pose(pose_id, modes, R, config)
+        entry["direction"] = direction
+        entries.append(entry)
+    return entries

@@ -114,3 +114,29 @@ def schedule_pose(pose_id: str, dyn: ToolTipDynamics, config: ScheduleConfig, fn
 
 def _mm(depth_m: float):
     return depth_m * 1e3 if math.isfinite(depth_m) else None
+
+
+def schedule_entries(table, config: ScheduleConfig, control) -> list[dict]:
+    """The `posedyn schedule` entry of every pose of a modal table: `schedule_pose` on the pose's
+    tool-tip model (with the lowest x-y mode's fn std), the pose's modes, and its controller
+    entry (`absorber.active.control_entries` with ControlConfig `control`)."""
+    from absorber.active import control_entries
+
+    controllers = {e["pose_id"]: e for e in control_entries(table, control)}
+    std = table.std.get("std_fn_hz")
+    entries = []
+    for p, pose_id in enumerate(table.poses.pose_id):
+        dyn = ToolTipDynamics.from_table(table, pose_id)
+        rows = [i for i in range(len(table)) if table.pose_index[i] == p and table.direction[i] in ("x", "y")]
+        lowest = min(rows, key=lambda i: table.fn_hz[i])
+        fn_std = float(std[lowest]) if std is not None and np.isfinite(std[lowest]) else 0.0
+        entry = schedule_pose(pose_id, dyn, config, fn_std)
+        entry["modes"] = [
+            {"direction": str(table.direction[i]), "mode": int(table.mode[i]), "fn_hz": float(table.fn_hz[i]), "zeta": float(table.zeta[i]), "k_n_per_m": float(table.k_n_per_m[i])}
+            for i in range(len(table))
+            if table.pose_index[i] == p
+        ]
+        entry["controller"] = controllers[pose_id]
+        entries.append(entry)
+    return entries
+

@@ -76,7 +76,7 @@ def test_actuator_axis_angle_from_the_pose():
 
 
 def test_schedule_respects_the_force_limit_on_every_pose_of_the_campaign(datasets):
-    from posedyn.cli.control import control_entries
+    from absorber.active import control_entries
 
     table = read_modal_table(datasets / "campaigns/seed003_twin_s1.csv")
     entries = control_entries(table, ControlConfig())

@@ -110,31 +110,15 @@ def schedule(
 ):
     """Per-pose absorber schedule: chatter, target frequency, field, current, depths."""
     from absorber.mrf import MRFAbsorber
-    from absorber.schedule import ScheduleConfig, schedule_pose
-    from posedyn.dynamics import ToolTipDynamics
+    from absorber.schedule import ScheduleConfig, schedule_entries
     from posedyn.io.cut import read_cut
 
-    from posedyn.cli.control import control_entries, read_actuator
+    from posedyn.cli.control import read_actuator
 
     the_cut, rpm, steps = read_cut(cut)
     config = ScheduleConfig(the_cut, rpm, MRFAbsorber.from_toml(absorber) if absorber else MRFAbsorber(), policy=policy.value, steps=steps)
     table = modal_table_for(model_dir, modes, poses)
-    controllers = {e["pose_id"]: e for e in control_entries(table, read_actuator(actuator))}
-    entries = []
-    for p, pose_id in enumerate(table.poses.pose_id):
-        dyn = ToolTipDynamics.from_table(table, pose_id)
-        rows = [i for i in range(len(table)) if table.pose_index[i] == p and table.direction[i] in ("x", "y")]
-        std = table.std.get("std_fn_hz")
-        lowest = min(rows, key=lambda i: table.fn_hz[i])
-        fn_std = float(std[lowest]) if std is not None and np.isfinite(std[lowest]) else 0.0
-        entry = schedule_pose(pose_id, dyn, config, fn_std)
-        entry["modes"] = [
-            {"direction": str(table.direction[i]), "mode": int(table.mode[i]), "fn_hz": float(table.fn_hz[i]), "zeta": float(table.zeta[i]), "k_n_per_m": float(table.k_n_per_m[i])}
-            for i in range(len(table))
-            if table.pose_index[i] == p
-        ]
-        entry["controller"] = controllers[pose_id]
-        entries.append(entry)
+    entries = schedule_entries(table, config, read_actuator(actuator))
     if out is not None:
         _write_json(out, entries)
     if as_json:

@@ -39,33 +39,6 @@ def read_actuator(path: Optional[Path]):
         return ControlConfig(actuator=actuator, **{k: control[k] for k in ("mount_axis", "disturbance_n", "margin_db", "virtual_layout", "virtual_mass_ratio") if k in control})
 
 
-def pose_rotation(poses, i: int) -> np.ndarray:
-    from posedyn.robot import rotation_from_abc, rotation_from_beta
-
-    if poses.orientation == "beta":
-        return rotation_from_beta(math.radians(poses.orientation_deg[i, 0]))
-    return rotation_from_abc(*np.radians(poses.orientation_deg[i]))
-
-
-def control_entries(table, config) -> list[dict]:
-    """One control schedule entry per pose of a modal table (robot modes below 500 Hz in the
-    actuator's direction: the tool frame's mounting axis in the x-y plane, nearest of x, y)."""
-    from absorber.active import actuator_direction, control_schedule_pose
-
-    entries = []
-    for p, pose_id in enumerate(table.poses.pose_id):
-        R = pose_rotation(table.poses, p)
-        direction = actuator_direction(R, config.mount_axis)
-        rows = [i for i in range(len(table)) if table.pose_index[i] == p and table.direction[i] == direction and table.fn_hz[i] < 500]
-        if not rows:
-            raise InputError(f"robot modes below 500 Hz in {direction} for pose '{pose_id}'", column="direction")
-        modes = [(float(table.fn_hz[i]), float(table.zeta[i]), float(table.k_n_per_m[i])) for i in rows]
-        entry = control_schedule_pose(pose_id, modes, R, config)
-        entry["direction"] = direction
-        entries.append(entry)
-    return entries
-
-
 @app.command("schedule")
 def schedule(
     model_dir: Optional[Path] = typer.Argument(None, help="Model directory (or give --modes)."),
@@ -79,6 +52,8 @@ def schedule(
 
     config = read_actuator(actuator)
     table = modal_table_for(model_dir, modes, poses)
+    from absorber.active import control_entries
+
     entries = control_entries(table, config)
     if as_json:
         print_json(entries)
