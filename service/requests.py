@@ -1,0 +1,134 @@
+"""Validation of the service's JSON requests: every way a request can be wrong gets a code and
+a message naming the field and what was expected (`RequestError`), before any work is done."""
+
+from __future__ import annotations
+
+import json
+import math
+
+POSE_FIELDS = ("pose_id", "x_mm", "y_mm", "z_mm", "beta_deg", "a_deg", "b_deg", "c_deg")
+CUT_FIELDS = ("rpm", "teeth", "kt_mpa", "kn_mpa", "radial_immersion", "milling", "feed_angle_deg")
+
+
+class RequestError(Exception):
+    """A request the service refuses: `code` (machine-readable) and a message for people."""
+
+    def __init__(self, code: str, message: str):
+        super().__init__(message)
+        self.code, self.message = code, message
+
+    def to_json(self) -> bytes:
+        return json.dumps({"error": self.code, "message": self.message}).encode()
+
+
+def parse_json(payload: bytes | None, max_bytes: int, required: bool = True):
+    """The JSON document of a payload: size, UTF-8, syntax, and no NaN or Infinity."""
+    if payload is None or len(payload) == 0:
+        if required:
+            raise RequestError("missing_payload", "expected a JSON payload, got none")
+        return None
+    if len(payload) > max_bytes:
+        raise RequestError("payload_too_large", f"expected a payload of at most {max_bytes} bytes, got {len(payload)}")
+    try:
+        text = payload.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise RequestError("malformed_json", f"expected UTF-8 JSON, got undecodable bytes at offset {exc.start}") from None
+
+    def refuse(constant):
+        raise RequestError("not_finite", f"expected finite numbers, got {constant}")
+
+    try:
+        return json.loads(text, parse_constant=refuse)
+    except RequestError:
+        raise
+    except (ValueError, RecursionError) as exc:
+        raise RequestError("malformed_json", f"expected JSON, got: {exc}") from None
+
+
+def _object(value, where: str, allowed: tuple[str, ...]) -> dict:
+    if not isinstance(value, dict):
+        raise RequestError("invalid_field", f"{where}: expected a JSON object, got {type(value).__name__}")
+    unknown = sorted(set(value) - set(allowed))
+    if unknown:
+        raise RequestError("unknown_field", f"{where}: unknown field(s) {unknown}; expected among {list(allowed)}")
+    return value
+
+
+def _number(obj: dict, key: str, where: str, required: bool = True):
+    if key not in obj:
+        if required:
+            raise RequestError("missing_field", f"{where}.{key}: expected a number, got nothing")
+        return None
+    value = obj[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise RequestError("invalid_field", f"{where}.{key}: expected a number, got {json.dumps(value)[:40]}")
+    if not math.isfinite(value):
+        raise RequestError("not_finite", f"{where}.{key}: expected a finite number, got {value}")
+    return float(value)
+
+
+def parse_pose(value, where: str = "pose") -> dict:
+    """{pose_id, x_mm, y_mm, z_mm, and beta_deg or a_deg, b_deg, c_deg}, numbers finite."""
+    obj = _object(value, where, POSE_FIELDS)
+    pose = {k: _number(obj, k, where) for k in ("x_mm", "y_mm", "z_mm")}
+    has_beta, has_abc = "beta_deg" in obj, any(k in obj for k in ("a_deg", "b_deg", "c_deg"))
+    if has_beta == has_abc:
+        raise RequestError("missing_field" if not has_beta else "invalid_field", f"{where}: expected either beta_deg or a_deg, b_deg, c_deg")
+    for key in ("beta_deg",) if has_beta else ("a_deg", "b_deg", "c_deg"):
+        pose[key] = _number(obj, key, where)
+    pose_id = obj.get("pose_id", "pose")
+    if not isinstance(pose_id, str) or not pose_id or len(pose_id) > 200:
+        raise RequestError("invalid_field", f"{where}.pose_id: expected a non-empty string of at most 200 characters")
+    pose["pose_id"] = pose_id
+    return pose
+
+
+def parse_cut(value, where: str = "cut") -> dict:
+    """Overrides of the service's default cut (any subset of CUT_FIELDS)."""
+    if value is None:
+        return {}
+    obj = _object(value, where, CUT_FIELDS)
+    cut = {}
+    for key in CUT_FIELDS:
+        if key not in obj:
+            continue
+        if key == "milling":
+            if obj[key] not in ("down", "up"):
+                raise RequestError("invalid_field", f"{where}.milling: expected 'down' or 'up', got {json.dumps(obj[key])[:40]}")
+            cut[key] = obj[key]
+        elif key == "teeth":
+            teeth = obj[key]
+            if isinstance(teeth, bool) or not isinstance(teeth, int) or not 1 <= teeth <= 100:
+                raise RequestError("invalid_field", f"{where}.teeth: expected an integer from 1 to 100, got {json.dumps(teeth)[:40]}")
+            cut[key] = teeth
+        else:
+            cut[key] = _number(obj, key, where)
+    return cut
+
+
+def parse_schedule_request(payload: bytes | None, max_bytes: int) -> tuple[dict, dict]:
+    doc = parse_json(payload, max_bytes)
+    obj = _object(doc, "request", ("pose", "cut"))
+    if "pose" not in obj:
+        raise RequestError("missing_field", "request.pose: expected a pose object, got nothing")
+    return parse_pose(obj["pose"]), parse_cut(obj.get("cut"))
+
+
+def parse_plan_request(payload: bytes | None, max_bytes: int, max_poses: int) -> tuple[list[dict], dict] | None:
+    """None when there is no payload (a query for a stored plan)."""
+    doc = parse_json(payload, max_bytes, required=False)
+    if doc is None:
+        return None
+    obj = _object(doc, "request", ("poses", "cut"))
+    poses = obj.get("poses")
+    if not isinstance(poses, list) or not poses:
+        raise RequestError("missing_field" if poses is None else "invalid_field", "request.poses: expected a non-empty list of pose objects")
+    if len(poses) > max_poses:
+        raise RequestError("payload_too_large", f"request.poses: expected at most {max_poses} poses, got {len(poses)}")
+    return [parse_pose(p, f"poses[{i}]") for i, p in enumerate(poses)], parse_cut(obj.get("cut"))
+
+
+def valid_plan_id(plan_id: str) -> str:
+    if not plan_id or len(plan_id) > 100 or not all(c.isalnum() or c in "-_." for c in plan_id):
+        raise RequestError("invalid_plan_id", f"plan id: expected 1-100 characters from A-Z a-z 0-9 - _ ., got {plan_id[:40]!r}")
+    return plan_id
