@@ -41,6 +41,14 @@ demo: $(STAMP)
 	$(BIN)/posedyn sweep build/demo/model --grid datasets/campaigns/seed003_grid.toml \
 		--cut datasets/cuts/sweep_demo_cut.toml --out build/demo/sweep --workers 2 --chunk-size 28
 	@echo "open build/demo/sweep/report.html in a browser"
+	@echo
+	@echo "Serve schedules over Zenoh (embedded peer on 127.0.0.1:17447), ask for position 5's schedule, stop"
+	$(BIN)/posedyn serve --model build/demo/hou2023_model --cell demo --cut datasets/seeds/hou2023_cut.toml \
+		--listen tcp/127.0.0.1:17447 --state-dir build/demo/service > build/demo/service.log 2>&1 & pid=$$!; \
+	for i in $$(seq 1 150); do grep -q serving build/demo/service.log && break; sleep 0.2; done; \
+	$(BIN)/posedyn query --cell demo --connect tcp/127.0.0.1:17447 --timeout-s 60 \
+		--pose-json '{"pose_id": "P5", "x_mm": 1400, "y_mm": 0, "z_mm": 800, "beta_deg": 0}'; status=$$?; \
+	kill -TERM $$pid; wait $$pid; cat build/demo/service.log; exit $$status
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

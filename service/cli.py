@@ -193,10 +193,14 @@ def query(
     for e in entries:
         a = e["absorber"]
         console.print(
-            f"{e['pose_id']}: critical depth {e['critical_depth_mm']} mm, chatter {e['dominant_chatter_hz']:.2f} Hz, "
-            f"field {a['field_mt']:.1f} mT ({a['current_a']} A), with absorber {e['critical_depth_with_absorber_mm']} mm, "
-            f"DVF gain {e['controller']['dvf_gain_ns_per_m']:.0f} N s/m"
+            f"{e['pose_id']}: critical depth {_g(e['critical_depth_mm'])} mm, chatter {_g(e['dominant_chatter_hz'])} Hz -> "
+            f"absorber {_g(a['field_mt'])} mT, {_g(a['current_a'])} A{'' if a['feasible'] else ' (outside its range)'}, "
+            f"critical depth with it {_g(e['critical_depth_with_absorber_mm'])} mm; DVF gain {_g(e['controller']['dvf_gain_ns_per_m'])} N s/m"
         )
+
+
+def _g(value) -> str:
+    return "-" if value is None else f"{value:.4g}"
 
 
 def _json_option(text: str, option: str):
