@@ -72,21 +72,28 @@ def sims_target_hz(dyn: ToolTipDynamics, config: ScheduleConfig, around_hz: floa
     return float(best.x) if -best.fun > values[i] else float(grid[i])
 
 
-def schedule_pose(pose_id: str, dyn: ToolTipDynamics, config: ScheduleConfig, fn_std_hz: float = 0.0) -> dict:
-    model = StabilityModel(dyn, config.cut, Discretization(config.steps))
-    bare = model.critical_depths([config.rpm])
-    depth, chatter_hz = float(bare.depth_m[0]), float(bare.dominant_chatter_hz[0])
-    if not math.isfinite(chatter_hz):
-        chatter_hz = float(dyn.fn_hz[np.argmin(dyn.fn_hz)])
+def absorber_setting(dyn: ToolTipDynamics, config: ScheduleConfig, chatter_hz: float):
+    """(target Hz, FieldSetting, coil current A or NaN, feasible): the policy's target, the
+    field that tunes the absorber to it (clamped to its range) and whether the coil can give it."""
     target = chatter_hz if config.policy == "match" else sims_target_hz(dyn, config, chatter_hz)
-    absorber = config.absorber
-    setting = absorber.field_for_frequency(target, clamp=True)
+    setting = config.absorber.field_for_frequency(target, clamp=True)
     feasible = setting.feasible
     try:
         current = config.coil.current_for_field(setting.field_t)
         feasible = feasible and current <= config.coil.max_current_a
     except InputError:
         current, feasible = float("nan"), False
+    return target, setting, current, bool(feasible)
+
+
+def schedule_pose(pose_id: str, dyn: ToolTipDynamics, config: ScheduleConfig, fn_std_hz: float = 0.0) -> dict:
+    model = StabilityModel(dyn, config.cut, Discretization(config.steps))
+    bare = model.critical_depths([config.rpm])
+    depth, chatter_hz = float(bare.depth_m[0]), float(bare.dominant_chatter_hz[0])
+    if not math.isfinite(chatter_hz):
+        chatter_hz = float(dyn.fn_hz[np.argmin(dyn.fn_hz)])
+    target, setting, current, feasible = absorber_setting(dyn, config, chatter_hz)
+    absorber = config.absorber
     spread = 2.0 * fn_std_hz * target / max(chatter_hz, 1e-12)
     interval = [absorber.field_for_frequency(max(target - spread, 1e-6), clamp=True).field_t, absorber.field_for_frequency(target + spread, clamp=True).field_t]
     structure = coupled(dyn, config, setting.field_t)

@@ -259,7 +259,6 @@ def compute_chunk(spec_json: str, poses, grid_twin: str | None = None) -> list[d
     """Result rows (dicts, `RESULT_COLUMNS` plus pose and mode columns) for a PoseSet."""
     from absorber.schedule import coupled
     from posedyn.stability import Discretization
-    from posedyn.stability.batch import BatchStability
 
     ctx = context(spec_json, grid_twin)
     index = list(range(len(poses)))
@@ -285,7 +284,7 @@ def compute_chunk(spec_json: str, poses, grid_twin: str | None = None) -> list[d
         depth, chatter_hz = bare[i]
         if not math.isfinite(chatter_hz):
             chatter_hz = float(pm.dyn.fn_hz[np.argmin(pm.dyn.fn_hz)])
-        entry = _absorber_setting(pm, config, chatter_hz, lowest_std=rows[i]["lowest_fn_std_hz"] or 0.0)
+        entry = _absorber_setting(pm, config, chatter_hz)
         rows[i].update(critical_depth_mm=_mm(depth), dominant_chatter_hz=chatter_hz, **entry["columns"])
         structures[i] = coupled(pm.dyn, config, entry["field_t"])
         if not entry["columns"]["absorber_feasible"]:
@@ -327,24 +326,17 @@ def _critical_by_group(structures: dict, cut, rpm, disc, frequencies: bool, gues
     return out
 
 
-def _absorber_setting(pm: PoseModes, config, chatter_hz: float, lowest_std: float) -> dict:
-    from absorber.schedule import sims_target_hz
+def _absorber_setting(pm: PoseModes, config, chatter_hz: float) -> dict:
+    from absorber.schedule import absorber_setting
 
-    target = chatter_hz if config.policy == "match" else sims_target_hz(pm.dyn, config, chatter_hz)
-    setting = config.absorber.field_for_frequency(target, clamp=True)
-    feasible = setting.feasible
-    try:
-        current = config.coil.current_for_field(setting.field_t)
-        feasible = feasible and current <= config.coil.max_current_a
-    except InputError:
-        current, feasible = float("nan"), False
+    target, setting, current, feasible = absorber_setting(pm.dyn, config, chatter_hz)
     return {
         "field_t": setting.field_t,
         "columns": {
             "target_hz": target,
             "field_mt": setting.field_t * 1e3,
             "current_a": current if math.isfinite(current) else None,
-            "absorber_feasible": bool(feasible),
+            "absorber_feasible": feasible,
         },
     }
 

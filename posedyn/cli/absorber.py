@@ -9,7 +9,6 @@ from pathlib import Path
 from typing import Optional
 
 import typer
-import numpy as np
 from rich.table import Table
 
 from posedyn.cli.common import Milling, console, finite_or_none, print_json

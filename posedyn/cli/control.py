@@ -3,16 +3,13 @@
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Optional
 
-import numpy as np
 import typer
 from rich.table import Table
 
 from posedyn.cli.common import console, print_json
-from posedyn.errors import InputError
 
 app = typer.Typer(help="Active damping: DVF gain schedules and virtual absorbers.", no_args_is_help=True)
 
