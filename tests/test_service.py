@@ -105,6 +105,7 @@ def test_every_bad_input_gets_its_error_and_the_service_keeps_answering(client):
         client.get("plan/bad id!", None)
     assert err.value.code in ("invalid_plan_id", "no_reply")  # a space is not a valid key expression either
     assert client.schedule(P5)["pose_id"] == "P5"
+    assert client.schedule(P5)["pose_id"] == "P5"  # the second from the cache
     status = client.status()
     assert status["errors"] >= len(cases) and status["cache_hits"] >= 1
 
@@ -265,3 +266,16 @@ def test_query_cli_reports_errors_and_zero_replies(service, tmp_path):
 def test_the_shipped_security_examples_are_valid_zenoh_configs():
     for path in sorted((ROOT / "service/config").glob("*.json5")):
         zenoh.Config.from_file(str(path))  # raises on an unknown key or a syntax error
+
+
+def test_a_plan_put_is_published_and_the_service_is_alive(service):
+    conf = zenoh_config(None, "client", connect=[service[1]])
+    with zenoh.open(conf) as session:
+        alive = list(session.liveliness().get("cells/cell1/posedyn/alive", timeout=5))
+        assert alive and alive[0].ok is not None
+        session.put("cells/cell1/posedyn/plan/put-1", json.dumps({"poses": [dict(P5, pose_id="p")]}))
+        session.put("cells/cell1/posedyn/plan/put-2", b"not json")  # refused and counted, nothing dies
+    got = _late_subscriber(service[1], "cells/cell1/posedyn/schedules/put-1", wait_s=30)
+    assert got and got[-1]["entries"][0]["pose_id"] == "p"
+    with ScheduleClient("cell1", connect=[service[1]]) as c:
+        assert c.status()["plans_published"] >= 1
