@@ -135,6 +135,13 @@ def generate_measurements(baseline: Baseline, hidden: dict, seed: int = 0, poses
     depends on varied independently, the named effects `hidden` ({name: {parameter: value}})
     applied to the baseline, and Gaussian noise (NOISE). `unknown(m, y) -> y` hides an effect
     that is not in the library (for tests)."""
+    design = campaign_design(seed, poses)
+    y, with_context = baseline.predict(design)
+    return hide(design, y, with_context, hidden, seed, unknown)
+
+
+def campaign_design(seed: int = 0, poses: int = 10) -> Measurements:
+    """The rows of a synthetic campaign (poses, quantities, conditions; values still zero)."""
     rng = np.random.default_rng(seed)
     rows = []
 
@@ -159,7 +166,7 @@ def generate_measurements(baseline: Baseline, hidden: dict, seed: int = 0, poses
         add("absorber", first, "absorber_zeta", **c)
     names = ["x_mm", "y_mm", "z_mm", "beta_deg", "rpm", "field_mt", "temperature_c", "absorber_angle_deg", "device", "moving", "fixture", "force_n"]
     conditions = {c: np.array([r[1].get(c, r[5].get(c, np.nan)) for r in rows], dtype=float) for c in names}
-    m = Measurements(
+    return Measurements(
         quantity=np.array([r[2] for r in rows]),
         value=np.zeros(len(rows)),
         std=np.ones(len(rows)),
@@ -168,14 +175,18 @@ def generate_measurements(baseline: Baseline, hidden: dict, seed: int = 0, poses
         mode=np.array([r[4] for r in rows], dtype=float),
         conditions=conditions,
     )
-    y, with_context = baseline.predict(m)
+
+
+def hide(design: Measurements, y: np.ndarray, with_context: Measurements, hidden: dict, seed: int = 0, unknown=None) -> Measurements:
+    """Measured values: the baseline y with the hidden effects applied, plus noise (seeded)."""
     names_hidden = tuple(hidden)
     theta = np.array([hidden[n][p.name] for n in names_hidden for p in LIBRARY[n].parameters])
     truth = predict(names_hidden, theta, y, with_context) if names_hidden else y
     if unknown is not None:
         truth = unknown(with_context, truth)
+    m = design
     relative = np.array([NOISE[q] for q in m.quantity])
     scale = np.where(m.quantity == "k_xy_n_per_m", np.sqrt(np.abs(with_context.conditions["model_k_x_n_per_m"] * with_context.conditions["model_k_y_n_per_m"])), np.abs(truth))
     std = relative * scale
-    value = truth + rng.standard_normal(len(truth)) * std
+    value = truth + np.random.default_rng([seed, 1]).standard_normal(len(truth)) * std
     return replace(m, value=value, std=std)
