@@ -163,7 +163,7 @@ def _library() -> dict[str, CandidateEffect]:
         CandidateEffect("moving_robot", "a moving robot's modes differ from the stationary ones measured by impact tests", "seed 001 section 4.3",
                         ("fn_hz",), ("moving",), (Parameter("fn_shift_pct", 0.5, -50.0, 50.0),), moving),
         CandidateEffect("fixture_compliance", "a compliant fixture / workpiece adds its flexibility to the tool tip", "seed 001 Table 5 (workpiece/fixture FRFs)",
-                        ("k_n_per_m",), ("fixture",), (Parameter("log10_k_fixture_n_per_m", 8.0, 5.0, 11.0),), fixture),
+                        ("k_n_per_m",), ("fixture",), (Parameter("log10_k_fixture_n_per_m", 8.0, 5.0, 14.0),), fixture),
         CandidateEffect("xy_cross_coupling", "the x and y tool-tip directions are coupled (cross stiffness turning with the redundant angle)", "seed 003 (coupled multi-output dynamics)",
                         ("k_xy_n_per_m",), ("beta_deg",), (Parameter("coupling", 0.05, -1.0, 1.0),), coupling),
         CandidateEffect("mrf_loss_modulus", "the MRF loss modulus adds field-dependent absorber damping (seed 004 keeps only G')", "seed 004 section 2 (storage modulus model only)",
