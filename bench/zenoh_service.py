@@ -6,7 +6,7 @@ computation), the throughput of 4 concurrent clients sending 10,000 queries in a
 cached schedule), the error count, and the ratios. Targets (issue 8): cached p50 <= 1 ms,
 p99 <= 10 ms, throughput >= half of the echo's, zero errors.
 
-    .venv/bin/python bench/service.py [--queries 10000] [--clients 4]
+    .venv/bin/python bench/zenoh_service.py [--queries 10000] [--clients 4]
 """
 
 from __future__ import annotations
