@@ -40,7 +40,7 @@ def sweep(
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
 
     from service.report import now_utc, software_versions, write_report
-    from service.sweep import SweepSpec, read_sweep_poses, representative_lobes
+    from service.sweep import SweepSpec, representative_lobes
     from service.sweep_run import run_sweep
 
     if (model_dir is None) == (twin is None):
@@ -63,9 +63,8 @@ def sweep(
     with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(), console=console, disable=not show) as bar:
         task = bar.add_task("chunks", total=None)
         outcome = run_sweep(spec, out, workers=workers, scheduler=scheduler, resume=resume, progress=lambda done, total: bar.update(task, completed=done, total=total))
-    poses, grid_twin = read_sweep_poses(spec.poses)
-    lobe_curves = representative_lobes(spec.to_json(), poses, outcome.rows, grid_twin) if lobes else []
-    provenance = _provenance(spec, outcome, grid_twin)
+    lobe_curves = representative_lobes(spec.to_json(), outcome.poses, outcome.rows, outcome.grid_twin) if lobes else []
+    provenance = _provenance(spec, outcome, outcome.grid_twin)
     provenance["software"] = software_versions()
     provenance["written"] = now_utc()
     write_report(out / "report.html", outcome.rows, lobe_curves, provenance, title=f"Pose sweep: {grid.name}")

@@ -34,6 +34,8 @@ class SweepOutcome:
     seconds: float
     workers: int
     manifest: dict
+    poses: object  # the PoseSet swept
+    grid_twin: str | None
 
 
 def run_sweep(spec: SweepSpec, out: Path, workers: int | None = None, scheduler: str | None = None, resume: bool = False, progress=None) -> SweepOutcome:
@@ -66,7 +68,7 @@ def run_sweep(spec: SweepSpec, out: Path, workers: int | None = None, scheduler:
     columns = result_columns(rows)
     write_text_atomic(out / "results.csv", rows_to_csv(rows, columns))
     _write_parquet(out / "results.parquet", rows, columns)
-    return SweepOutcome(rows, columns, len(pending), len(done), time.perf_counter() - start, used_workers, manifest)
+    return SweepOutcome(rows, columns, len(pending), len(done), time.perf_counter() - start, used_workers, manifest, poses, grid_twin)
 
 
 def _prepare(out: Path, manifest: dict, resume: bool) -> None:
