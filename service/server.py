@@ -77,7 +77,7 @@ class ScheduleService:
         self.counts = {"queries": 0, "errors": 0, "cache_hits": 0, "computations": 0, "busy": 0, "plans_published": 0}
         self._count_lock = threading.Lock()
         self._cache: OrderedDict[str, dict] = OrderedDict()
-        self._replies: dict[tuple[str, str], bytes] = {}
+        self._replies: dict[str, dict[str, bytes]] = {}  # serialized replies per schedule key and pose_id
         self._cache_lock = threading.Lock()
         self._jobs: queue.Queue = queue.Queue(maxsize=settings.queue_size)
         self._publishers: OrderedDict[str, list] = OrderedDict()
@@ -251,23 +251,23 @@ class ScheduleService:
                 self._cache[key] = entry
                 while len(self._cache) > self.settings.cache_entries:
                     old, _ = self._cache.popitem(last=False)
-                    self._replies = {k: v for k, v in self._replies.items() if k[0] != old}
+                    self._replies.pop(old, None)
         return dict(entry, pose_id=pose["pose_id"])
 
     def _reply_entry(self, query, key, pose, cut) -> None:
         doc = self.schedule(key, pose, cut)
         payload = json.dumps(doc).encode()
         with self._cache_lock:
-            self._replies[(key, pose["pose_id"])] = payload
+            self._replies.setdefault(key, {})[pose["pose_id"]] = payload
         query.reply(query.key_expr, payload)
 
     def _cached_reply(self, key: str, pose_id: str) -> bytes | None:
         with self._cache_lock:
-            payload = self._replies.get((key, pose_id))
+            payload = self._replies.get(key, {}).get(pose_id)
             if payload is not None or key not in self._cache:
                 return payload
             payload = json.dumps(dict(self._cache[key], pose_id=pose_id)).encode()
-            self._replies[(key, pose_id)] = payload
+            self._replies.setdefault(key, {})[pose_id] = payload
             return payload
 
     def compute_plan(self, plan_id: str, poses: list[dict], cut: dict) -> dict:
