@@ -24,7 +24,6 @@ Defaults eta1 = 0.15, eta2 = 0.12 are mid-range literature values, not measureme
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass
 
 from posedyn.errors import InputError, check_non_negative, check_positive
@@ -62,23 +61,6 @@ class MRFAbsorber:
             raise InputError("ginf_pa > g0_pa", got=(self.g0_pa, self.ginf_pa), column="ginf_pa")
         if not self.field_max_t > self.field_min_t:
             raise InputError("field_max_t > field_min_t", got=(self.field_min_t, self.field_max_t), column="field_max_t")
-
-    @classmethod
-    def from_toml(cls, path: str | os.PathLike) -> "MRFAbsorber":
-        """Read the `[absorber]`, `[mrf]`, `[field]` tables of an absorber parameter file
-        (as datasets/seeds/hou2023_mrf_absorber.toml)."""
-        from posedyn.io.params import read_params, reading
-
-        p = read_params(path)
-        with reading(path, "absorber file"):
-            a, m, f = p["absorber"], p["mrf"], p["field"]
-            return cls(
-                mass_kg=a["mass_kg"], r1_m=a["r1_m"], r2_m=a["r2_m"], l1_m=a["l1_m"], w1_m=a["w1_m"], h1_m=a["h1_m"], h2_m=a["h2_m"],
-                g2_pa=a["elastomer_shear_modulus_pa"], g0_pa=m["g0_pa"], ginf_pa=m["ginf_pa"], a1=m["a1"], a2=m["a2"],
-                field_min_t=f["min_mt"] * 1e-3, field_max_t=f["max_mt"] * 1e-3,
-                **{k: m[k] for k in ("loss_factor_mrf",) if k in m},
-                **{k: a[k] for k in ("loss_factor_elastomer",) if k in a},
-            )
 
     @property
     def a1_m2(self) -> float:

@@ -15,22 +15,21 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 import numpy as np
 from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
 
-from posedyn.campaign import Noise, generate_campaign
-from posedyn.effects import DeviceMass
-from posedyn.gp import fit_gp
-from posedyn.gpr import PoseModel, feature_matrix, select_features, table_targets
+from posedyn.io.shipped import DATASETS
+from posedyn.robot.campaign import Noise, generate_campaign
+from posedyn.robot.twin_effects import DeviceMass
+from posedyn.posemodel import fit_gp
+from posedyn.posemodel import PoseModel, feature_matrix, select_features, table_targets
 from posedyn.io import read_modal_table
-from posedyn.io.grid import read_grid, read_twin
-from posedyn.robot import Robot
+from posedyn.io.grid import read_grid
+from posedyn.io.twin_file import load_twin
 from posedyn.table import PoseSet
 
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def timed(fn):
@@ -43,14 +42,13 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--quick", action="store_true", help="fewer learning-curve points")
     args = parser.parse_args()
-    spec = read_twin(ROOT / "datasets/robots/kr_r2700_twin.toml")
-    robot = Robot.from_urdf(spec.urdf, payload_kg=spec.payload_kg)
-    table = read_modal_table(ROOT / "datasets/campaigns/seed003_twin_s1.csv")
+    robot, params = load_twin()
+    table = read_modal_table(DATASETS / "campaigns/seed003_twin_s1.csv")
     names, Y = table_targets(table)
     print(f"training on {len(table.poses)} poses, {len(names)} targets")
     models, seconds_fit = {}, {}
     for method in ("stgp", "mtgp", "physics"):
-        models[method], seconds_fit[method] = timed(lambda: PoseModel(method, twin=(robot, spec.params)).fit(table))
+        models[method], seconds_fit[method] = timed(lambda: PoseModel(method, twin=(robot, params)).fit(table))
         print(f"  {method:8s} {seconds_fit[method]:6.2f} s  ({len(models[method].groups_)} GPs)")
     features = select_features(table.poses, None)
     X = feature_matrix(table.poses, features)
@@ -88,22 +86,22 @@ def main() -> None:
     print(f"  predict 1,000 poses with std, physics (inverse kinematics + twin per pose): {seconds:.2f} s")
 
     print("learning curve: mean relative error on x1.fn_hz at the other poses (as-built robot, seeds 0-2)")
-    grid = list(read_grid(ROOT / "datasets/campaigns/seed003_grid.toml").poses)
-    built = Robot.from_urdf(spec.urdf, payload_kg=65.0)
+    grid = list(read_grid(DATASETS / "campaigns/seed003_grid.toml").poses)
+    built, _ = load_twin(payload_kg=65.0)
     sizes = (5, 10, 20, 40, 80) if args.quick else (5, 10, 15, 20, 30, 40, 60, 80, 100)
     print("  poses   " + "   ".join(f"{m:>8s}" for m in ("stgp", "mtgp", "physics")))
     curves = {m: [] for m in ("stgp", "mtgp", "physics")}
     for size in sizes:
         errors = {m: [] for m in curves}
         for seed in range(3):
-            params = spec.params.scaled(np.random.default_rng(100 + seed).uniform(0.7, 1.3, 6))
-            measured = generate_campaign(built, grid, params, Noise(), seed=seed, effects=(DeviceMass(mass_kg=8.0),))
-            truth = generate_campaign(built, grid, params, Noise(0, 0, 0), seed=seed, effects=(DeviceMass(mass_kg=8.0),))
+            as_built = params.scaled(np.random.default_rng(100 + seed).uniform(0.7, 1.3, 6))
+            measured = generate_campaign(built, grid, as_built, Noise(), seed=seed, effects=(DeviceMass(mass_kg=8.0),))
+            truth = generate_campaign(built, grid, as_built, Noise(0, 0, 0), seed=seed, effects=(DeviceMass(mass_kg=8.0),))
             order = np.random.default_rng(seed).permutation(len(grid))
             train, test = order[:size], order[size:]
             t_names, true_values = table_targets(truth.select_poses(test))
             for m in curves:
-                model = PoseModel(m, twin=(robot, spec.params), random_state=seed).fit(measured.select_poses(train))
+                model = PoseModel(m, twin=(robot, params), random_state=seed).fit(measured.select_poses(train))
                 predicted = model.predict(measured.select_poses(test).poses)[:, model.targets_.index("x1.fn_hz")]
                 errors[m].append(np.mean(np.abs(predicted / true_values[:, t_names.index("x1.fn_hz")] - 1)))
         print(f"  {size:5d}   " + "   ".join(f"{100 * np.mean(errors[m]):7.2f}%" for m in curves))

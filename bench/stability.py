@@ -21,16 +21,15 @@ import math
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 
 import numpy as np
 
+from posedyn.io.shipped import DATASETS
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.io import read_modal_table
 from posedyn.stability import Cut, Discretization, StabilityModel, reference
 from posedyn.table import Mode
 
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def bench_map(immersion: float, baseline_points: int | None) -> None:
@@ -71,7 +70,7 @@ def bench_map(immersion: float, baseline_points: int | None) -> None:
 
 
 def bench_pose() -> None:
-    table = read_modal_table(ROOT / "datasets/seeds/hou2023_positions.csv")
+    table = read_modal_table(DATASETS / "seeds/hou2023_positions.csv")
     first = table.modes("P5", "x")[0]
     dyn = ToolTipDynamics.from_modes(x=[first, Mode(48.0, 0.03, 6e6)], y=[first, Mode(55.0, 0.025, 8e6)])
     cut = Cut(teeth=3, kt_pa=796e6, kn_pa=169e6, radial_immersion=0.5, milling="down")

@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
+from posedyn.io.shipped import DATASETS
 from service.sweep import SweepSpec
-from service.sweep_run import run_sweep
+from service.sweep.runner import run_sweep
 
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def grid_file(folder: Path, poses: int) -> Path:
@@ -40,8 +40,8 @@ def grid_file(folder: Path, poses: int) -> Path:
 def run(grid: Path, out: Path, workers: int) -> float:
     spec = SweepSpec(
         poses=str(grid),
-        cut=str(ROOT / "datasets/cuts/sweep_demo_cut.toml"),
-        twin=str(ROOT / "datasets/robots/kr_r2700_twin.toml"),
+        cut=str(DATASETS / "cuts/sweep_demo_cut.toml"),
+        twin=str(DATASETS / "robots/kr_r2700_twin.toml"),
     )
     outcome = run_sweep(spec, out, workers=workers)
     reachable = sum(1 for r in outcome.rows if r["reachable"])

@@ -5,35 +5,32 @@ from __future__ import annotations
 
 import math
 import time
-from pathlib import Path
 
 import numpy as np
 
-from posedyn.campaign import GridPose, pose_modes
-from posedyn.io.grid import read_twin
-from posedyn.robot import Robot, ToolPose
+from posedyn.robot.campaign import GridPose, pose_modes
+from posedyn.io.twin_file import load_twin
+from posedyn.robot import ToolPose
 
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def main() -> None:
-    spec = read_twin(ROOT / "datasets/robots/kr_r2700_twin.toml")
-    robot = Robot.from_urdf(spec.urdf, payload_kg=spec.payload_kg)
+    robot, params = load_twin()
     data = robot.model.createData()
     rng = np.random.default_rng(0)
     poses = [
         GridPose("p", ToolPose.from_beta(x, y, 0.6, math.radians(b)))
         for x, y, b in zip(rng.uniform(1.3, 1.9, 10_000), rng.uniform(-0.3, 0.3, 10_000), rng.uniform(-60, 60, 10_000))
     ]
-    pose_modes(robot, poses[0], spec.params, data=data)  # warm-up
+    pose_modes(robot, poses[0], params, data=data)  # warm-up
     times = []
     for _ in range(200):
         start = time.perf_counter()
-        pose_modes(robot, poses[1], spec.params, data=data)
+        pose_modes(robot, poses[1], params, data=data)
         times.append(time.perf_counter() - start)
     print(f"modes at one pose (IK + M(q) + eigenproblem + Jacobian): {np.median(times) * 1e6:.0f} us median of 200")
     start = time.perf_counter()
-    lowest = [pose_modes(robot, p, spec.params, data=data)[1].fn_hz[0] for p in poses]
+    lowest = [pose_modes(robot, p, params, data=data)[1].fn_hz[0] for p in poses]
     elapsed = time.perf_counter() - start
     print(f"modes at 10,000 poses: {elapsed:.2f} s ({elapsed / len(poses) * 1e6:.0f} us per pose), lowest mode {min(lowest):.1f}-{max(lowest):.1f} Hz")
 

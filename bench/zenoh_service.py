@@ -26,7 +26,8 @@ from pathlib import Path
 import numpy as np
 import zenoh
 
-ROOT = Path(__file__).resolve().parents[1]
+from posedyn.io.shipped import DATASETS
+
 ECHO = """
 import signal, sys, threading, zenoh
 conf = zenoh.Config()
@@ -116,10 +117,10 @@ def main() -> None:
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         model = Path(tmp) / "model"
-        subprocess.run([sys.executable, "-c", "from service.cli import main; main()", "train", str(ROOT / "datasets/seeds/hou2023_positions.csv"), "--cv", "0", "--out", str(model)], check=True, capture_output=True)
+        subprocess.run([sys.executable, "-c", "from service.cli import main; main()", "train", str(DATASETS / "seeds/hou2023_positions.csv"), "--cv", "0", "--out", str(model)], check=True, capture_output=True)
         echo_ep, ours_ep = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
         echo = start([sys.executable, "-c", ECHO % echo_ep])
-        ours = start([sys.executable, "-c", "from service.cli import main; main()", "serve", "--model", str(model), "--cell", "bench", "--cut", str(ROOT / "datasets/seeds/hou2023_cut.toml"), "--listen", ours_ep, "--queue-size", "64"])
+        ours = start([sys.executable, "-c", "from service.cli import main; main()", "serve", "--model", str(model), "--cell", "bench", "--cut", str(DATASETS / "seeds/hou2023_cut.toml"), "--listen", ours_ep, "--queue-size", "64"])
         try:
             request = json.dumps({"pose": POSE}).encode()
             s_echo, s_ours = session(echo_ep), session(ours_ep)

@@ -1,5 +1,9 @@
-"""posedyn: pose-dependent tool-tip dynamics of milling robots, chatter prediction and the
-per-pose schedules (absorber field, controller gains) that suppress it."""
+"""posedyn: the core. Pose-dependent tool-tip dynamics of milling robots and chatter.
+
+Data types (`table`: modes, poses, modal tables; `dynamics`: the tool-tip modal model;
+`errors`), file formats (`io`), the robot and its twin (`robot`), pose models (`posemodel`),
+stability (`stability`), surface location error (`sle`), modal identification from FRFs
+(`identify`) and the gap workflow's statistics (`gap`). Imports no other project package."""
 
 from posedyn.errors import InputError
 from posedyn.table import Mode, ModalTable, PoseSet

@@ -27,6 +27,8 @@ import numpy as np
 
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.errors import InputError, check_choice, check_finite, check_non_negative, check_positive
+from posedyn.stability.sdm import exponentials
+from dataclasses import replace
 
 
 @dataclass(frozen=True)
@@ -122,15 +124,13 @@ def sle_time_domain_m(dyn: ToolTipDynamics, cut: SleCut, rpm: float, slices: int
     over one tooth period with exact exponentials (force linear between samples), the periodic
     state found from z0 = (I - P^n)^-1 z_n(0) instead of waiting for the start-up to die away,
     then y sampled at the surface instants."""
-    from posedyn.stability.sdm import _exponentials
-
     omega = 2 * math.pi * rpm / 60.0
     tau = 2 * math.pi / (cut.teeth * omega)
     n = int(steps_per_tooth)
     dt = tau / n
     K, C = dyn.stiffness_matrix, dyn.damping_matrix
     size = len(K)
-    P, g0, g1 = _exponentials(K[None], C[None], np.array([dt]), order=1)
+    P, g0, g1 = exponentials(K[None], C[None], np.array([dt]), order=1)
     P, g0, g1 = P[0], g0[0], g1[0]
     phi_y = dyn.shapes[1]
     force = normal_force(cut, omega * dt * np.arange(n + 1), slices)  # F_y at the step instants
@@ -161,8 +161,6 @@ def sle_quasi_static_m(dyn: ToolTipDynamics, cut: SleCut, slices: int = 20) -> f
 def compensate(dyn: ToolTipDynamics, cut: SleCut, rpm: float, tolerance_m: float = 2e-6, max_iterations: int = 20, slices: int = 20, offset_m: float = 0.0):
     """Seed 001 section 2.3: command the radial depth a_(k+1) = a_0 + SLE(a_k) until the part error
     a_0 - (a_k - SLE(a_k)) is below the tolerance. Returns [(radial_depth_m, sle_m, part_error_m)]."""
-    from dataclasses import replace
-
     target = cut.radial_depth_m
     depth = target
     history = []

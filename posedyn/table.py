@@ -138,6 +138,40 @@ class PoseSet:
                 out[name] = self.joints_deg[:, j]
         return out
 
+    @classmethod
+    def from_columns(cls, pose_id, columns: dict) -> "PoseSet":
+        """Poses from named columns (x_mm, y_mm, z_mm, then beta_deg or a_deg, b_deg, c_deg, and
+        optionally q1_deg..q6_deg), one value per pose: the one place a request, a campaign or
+        a table row becomes a PoseSet. A/B/C wins when both orientation forms are given."""
+        missing = [c for c in POSITION_COLUMNS if c not in columns]
+        abc = all(c in columns for c in ORIENTATION_COLUMNS["abc"])
+        if missing or not (abc or "beta_deg" in columns):
+            raise InputError("x_mm, y_mm, z_mm and beta_deg or a_deg, b_deg, c_deg", got=sorted(columns), column=(missing or ["beta_deg"])[0])
+        orientation = "abc" if abc else "beta"
+
+        def stack(names):
+            try:
+                return np.column_stack([np.asarray(columns[c], dtype=float).reshape(-1) for c in names])
+            except (TypeError, ValueError) as exc:
+                raise InputError("numbers", got=str(exc), column=names[0]) from None
+
+        joints = stack(JOINT_COLUMNS) if all(c in columns for c in JOINT_COLUMNS) else None
+        return cls(tuple(pose_id), stack(POSITION_COLUMNS), orientation, stack(ORIENTATION_COLUMNS[orientation]), joints)
+
+    def records(self) -> list[dict]:
+        """One {pose_id, x_mm, ..., orientation columns} dict per pose (JSON-ready floats)."""
+        names = POSITION_COLUMNS + ORIENTATION_COLUMNS[self.orientation]
+        values = np.column_stack([self.position_mm, self.orientation_deg])
+        return [{"pose_id": p, **{n: float(v) for n, v in zip(names, row)}} for p, row in zip(self.pose_id, values)]
+
+    def subset(self, indices) -> "PoseSet":
+        """The poses at `indices`, in that order."""
+        idx = list(indices)
+        return PoseSet(
+            tuple(self.pose_id[i] for i in idx), self.position_mm[idx], self.orientation, self.orientation_deg[idx],
+            None if self.joints_deg is None else self.joints_deg[idx],
+        )
+
     def index(self, pose_id: str) -> int:
         try:
             return self.pose_id.index(str(pose_id))

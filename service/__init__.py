@@ -1,2 +1,4 @@
-"""service: the Zenoh schedule service and its client. Imports `posedyn` and `absorber`.
-(Contents arrive with the service issue.)"""
+"""service: what runs. The one command line (`cli`), the Zenoh schedule service
+(`zenoh_service`), workspace sweeps on Dask with their report (`sweep`), the gap workflow's
+baseline and report (`gap`) and the HTML pieces the reports share (`html`). Imports `posedyn`
+and `absorber`; nothing imports it."""

@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 
 from absorber.coupling import with_absorber
-from absorber.schedule import ScheduleConfig, coupled, schedule_pose
+from dataclasses import replace
+
+from absorber.chain import ScheduleConfig, coupled, schedule_poses, table_pose_modes
 from absorber.tuning import Tuning
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.io import read_modal_table
@@ -37,14 +39,16 @@ def test_coupled_structure_reproduces_the_tmd_receptance():
 def position5(datasets):
     table = read_modal_table(datasets / "seeds/hou2023_positions.csv")
     cut, rpm, steps = read_cut(datasets / "seeds/hou2023_cut.toml")
-    return ToolTipDynamics.from_table(table, "P5"), cut, rpm, steps
+    pose = table_pose_modes(table.select_poses([table.poses.index("P5")]))[0]
+    return replace(pose, rows=tuple(r[:5] + (0.1,) for r in pose.rows)), cut, rpm, steps
 
 
 def test_position5_absorber_suppresses_chatter_in_the_time_domain(position5, capsys):
     """Seed 004 Figs. 8-9: at position 5 (2000 rpm) a cut 10 % deeper than the critical depth
     chatters without the absorber and decays with the absorber set by either policy."""
-    dyn, cut, rpm, steps = position5
-    results = {p: schedule_pose("P5", dyn, ScheduleConfig(cut, rpm, policy=p, steps=steps), fn_std_hz=0.1) for p in ("match", "sims")}
+    pose, cut, rpm, steps = position5
+    dyn = pose.dyn
+    results = {p: schedule_poses([pose], ScheduleConfig(cut, rpm, policy=p, steps=steps))[0].to_json() for p in ("match", "sims")}
     depth = 1.1 * results["match"]["critical_depth_mm"] * 1e-3
     bare = simulate(dyn, cut, rpm, [depth], periods=300, steps_per_delay=100)
     assert bare.growth_rate()[0] > 0

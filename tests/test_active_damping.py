@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from absorber.active import DVF, Actuator, ControlConfig, actuator_angle_to_gravity, gain_schedule, residue_frf
+from absorber.active_damping import DVF, Actuator, ControlConfig, actuator_angle_to_gravity, gain_schedule, residue_frf
 from posedyn.io import read_modal_table, read_params
 from posedyn.robot import rotation_from_beta
 
@@ -76,7 +76,7 @@ def test_actuator_axis_angle_from_the_pose():
 
 
 def test_schedule_respects_the_force_limit_on_every_pose_of_the_campaign(datasets):
-    from absorber.active import control_entries
+    from absorber.active_damping import control_entries
 
     table = read_modal_table(datasets / "campaigns/seed003_twin_s1.csv")
     entries = control_entries(table, ControlConfig())

@@ -11,7 +11,7 @@ from posedyn.dynamics import ToolTipDynamics
 from posedyn.errors import InputError
 from posedyn.io import read_modal_table
 from posedyn.io.frf import FRFSet, read_frf, read_frf_csv, write_frf_csv, write_frf_uff
-from posedyn.modal import direct_modal_parameters, matrix_modal_fit
+from posedyn.identify import direct_modal_parameters, matrix_modal_fit
 from posedyn.stability import Cut, Discretization, StabilityModel
 from posedyn.table import Mode
 
@@ -154,7 +154,7 @@ def test_bad_frf_files_get_clear_errors(tmp_path, text, words):
 def test_pose_model_learns_cross_coupling_and_predicts_coupled_modes():
     """Cross stiffnesses (signed) are learned as compliances 1 / k_xy in linear space and come
     back as the k_xy / k_yx columns of the predicted table, which builds a coupled structure."""
-    from posedyn.gpr import PoseModel
+    from posedyn.posemodel import PoseModel
     from posedyn.table import ModalTable, PoseSet
 
     n = 8

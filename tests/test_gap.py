@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from posedyn.gap import LIBRARY, analyse
-from service.gap_data import Baseline, campaign_design, generate_measurements, hide
+from service.gap.baseline import Baseline, campaign_design, generate_measurements, hide
 
 ROOT = Path(__file__).resolve().parents[1]
 SEEDS = range(20)

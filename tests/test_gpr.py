@@ -11,13 +11,14 @@ import pytest
 from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
 
-from posedyn import gp
-from posedyn.campaign import Noise, generate_campaign
-from posedyn.effects import DeviceMass
+from posedyn.posemodel import _gp as gp  # the GP core's likelihoods and gradients, tested directly
+from posedyn.robot.campaign import Noise, generate_campaign
+from posedyn.robot.twin_effects import DeviceMass
 from posedyn.errors import InputError
-from posedyn.gpr import PoseModel, cross_validate, r2_score, table_targets
+from posedyn.posemodel import PoseModel, cross_validate, r2_score, table_targets
 from posedyn.io import read_modal_table
-from posedyn.io.grid import read_grid, read_twin
+from posedyn.io.grid import read_grid
+from posedyn.io.twin_file import read_twin
 from posedyn.io.model_dir import load_model, save_model
 from posedyn.robot import Robot
 

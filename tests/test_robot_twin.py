@@ -9,13 +9,14 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from posedyn.campaign import GridPose, Noise, generate_campaign, pose_modes
-from posedyn.effects import DeviceMass, parse_effect
+from posedyn.robot.campaign import GridPose, Noise, generate_campaign, pose_modes
+from posedyn.robot.twin_effects import DeviceMass, parse_effect
 from posedyn.errors import InputError
 from posedyn.io import format_modal_table, read_modal_table
-from posedyn.io.grid import read_grid, read_twin
+from posedyn.io.grid import read_grid
+from posedyn.io.twin_file import read_twin
 from posedyn.robot import Robot, ToolPose, abc_from_rotation, rotation_from_abc
-from posedyn.twin import mass_matrix, normal_modes, twin_modes
+from posedyn.robot.twin import mass_matrix, normal_modes, twin_modes
 
 ROBOTS = "datasets/robots"
 

@@ -17,9 +17,10 @@ import pytest
 
 zenoh = pytest.importorskip("zenoh")
 
-from service.client import ScheduleClient, ServiceError  # noqa: E402
-from service.scheduler import Scheduler  # noqa: E402
-from service.server import ScheduleService, ServiceSettings, zenoh_config  # noqa: E402
+from service.zenoh_service.client import ScheduleClient, ServiceError  # noqa: E402
+from service.zenoh_service.engine import ScheduleEngine  # noqa: E402
+from service.zenoh_service.server import ScheduleService, ServiceSettings  # noqa: E402
+from service.zenoh_service.session import zenoh_config  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CUT = ROOT / "datasets/seeds/hou2023_cut.toml"
@@ -35,7 +36,7 @@ def free_port() -> int:
 
 @pytest.fixture(scope="module")
 def model_dir(tmp_path_factory) -> Path:
-    from posedyn.gpr import PoseModel
+    from posedyn.posemodel import PoseModel
     from posedyn.io import read_modal_table
     from posedyn.io.model_dir import save_model
 
@@ -49,7 +50,7 @@ def service(model_dir, tmp_path_factory):
     port = free_port()
     state = tmp_path_factory.mktemp("state")
     settings = ServiceSettings("cell1", max_payload_bytes=4096, queue_size=2, workers=1)
-    svc = ScheduleService(Scheduler(model_dir, CUT, twin=TWIN), settings, zenoh_config(None, "peer", [f"tcp/127.0.0.1:{port}"]), state).start()
+    svc = ScheduleService(ScheduleEngine(model_dir, CUT, twin=TWIN), settings, zenoh_config(None, "peer", [f"tcp/127.0.0.1:{port}"]), state).start()
     yield svc, f"tcp/127.0.0.1:{port}"
     svc.close()
 
@@ -264,7 +265,7 @@ def test_query_cli_reports_errors_and_zero_replies(service, tmp_path):
 
 
 def test_the_shipped_security_examples_are_valid_zenoh_configs():
-    for path in sorted((ROOT / "service/config").glob("*.json5")):
+    for path in sorted((ROOT / "service/zenoh_service/config").glob("*.json5")):
         zenoh.Config.from_file(str(path))  # raises on an unknown key or a syntax error
 
 

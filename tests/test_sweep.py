@@ -17,11 +17,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from posedyn.campaign import GridPose, pose_modes
+from posedyn.robot import GridPose, pose_modes
 from posedyn.errors import InputError
 from posedyn.io.cut import read_cut
-from posedyn.io.grid import read_twin
-from posedyn.robot import Robot, ToolPose
+from posedyn.io import read_modal_table
+from posedyn.io.model_dir import save_model
+from posedyn.posemodel import PoseModel
+from posedyn.io.twin_file import load_twin
+from posedyn.robot import ToolPose
 from posedyn.stability import Discretization, StabilityModel
 from posedyn.stability.batch import BatchStability
 
@@ -50,13 +53,12 @@ beta_deg = 0
 
 @pytest.fixture(scope="module")
 def twin_structures():
-    spec = read_twin(TWIN)
-    robot = Robot.from_urdf(spec.urdf, payload_kg=spec.payload_kg)
+    robot, params = load_twin(TWIN)
     rng = np.random.default_rng(3)
     out = []
     for _ in range(6):
         pose = ToolPose.from_beta(rng.uniform(1.3, 1.9), rng.uniform(-0.3, 0.3), 0.6, math.radians(rng.uniform(-60, 60)))
-        out.append(pose_modes(robot, GridPose("p", pose), spec.params)[1].dynamics())
+        out.append(pose_modes(robot, GridPose("p", pose), params)[1].dynamics())
     return out
 
 
@@ -121,7 +123,7 @@ def test_batch_refuses_mixed_mode_counts(twin_structures):
 
 
 def test_nyquist_gain_limit_matches_the_closed_loop_poles():
-    from absorber.active import DVF, Actuator, modal_frf
+    from absorber.active_damping import DVF, Actuator, modal_frf
 
     for modes in ([(13.0, 0.03, 1e6), (15.7, 0.03, 2e6)], [(9.2, 0.04, 5e5)], [(20, 0.02, 3e6), (50, 0.03, 1e7)]):
         H = modal_frf(modes)
@@ -175,24 +177,6 @@ def test_sweep_writes_results_chunks_and_report(twin_sweep):
     assert "src='http" not in html and 'src="http' not in html  # self-contained
 
 
-def test_sweep_pose_equals_posedyn_schedule(twin_sweep):
-    """The chain at one pose, computed the way `posedyn schedule` does (StabilityModel, 40 steps)."""
-    from absorber.schedule import ScheduleConfig, schedule_pose
-
-    rows = read_rows(twin_sweep / "results.csv")
-    row = next(r for r in rows if r["pose_id"] == "x1600_y300_z600_b30")
-    spec = read_twin(TWIN)
-    robot = Robot.from_urdf(spec.urdf, payload_kg=spec.payload_kg)
-    pose = GridPose("p", ToolPose.from_beta(1.6, 0.3, 0.6, math.radians(30)), beta_deg=30)
-    dyn = pose_modes(robot, pose, spec.params)[1].dynamics()
-    cut, rpm, steps = read_cut(CUT)
-    entry = schedule_pose("p", dyn, ScheduleConfig(cut, rpm, steps=steps))
-    assert float(row["critical_depth_mm"]) == pytest.approx(entry["critical_depth_mm"], rel=2e-3)
-    assert float(row["dominant_chatter_hz"]) == pytest.approx(entry["dominant_chatter_hz"], rel=1e-3)
-    assert float(row["field_mt"]) == pytest.approx(entry["absorber"]["field_mt"], rel=2e-3)
-    assert float(row["critical_depth_with_absorber_mm"]) == pytest.approx(entry["critical_depth_with_absorber_mm"], rel=2e-3)
-
-
 def test_sweep_refuses_to_mix_runs(twin_sweep, grid):
     again = sweep_cli("--twin", TWIN, "--grid", grid, "--cut", CUT, "--out", twin_sweep, "--workers", "1", "--chunk-size", "4", "--steps", "40", check=False)
     assert again.returncode == 2 and "--resume" in again.stderr
@@ -200,20 +184,30 @@ def test_sweep_refuses_to_mix_runs(twin_sweep, grid):
     assert changed.returncode == 2 and "fingerprint" in changed.stderr
 
 
-def test_sweep_with_a_trained_model_reports_uncertainty(tmp_path, grid):
-    from posedyn.gpr import PoseModel
-    from posedyn.io import read_modal_table
-    from posedyn.io.model_dir import save_model
-
+def test_sweep_with_a_trained_model_reports_uncertainty_and_equals_posedyn_schedule(tmp_path, grid):
+    """The sweep and `posedyn schedule` run the one per-pose chain: the same model, poses and
+    steps give the same numbers to the last digit."""
     table = read_modal_table(ROOT / "datasets/campaigns/seed003_twin_s1.csv")
     model = PoseModel(method="stgp").fit(table)
     save_model(model, tmp_path / "model")
     out = tmp_path / "out"
-    sweep_cli(tmp_path / "model", "--grid", grid, "--cut", CUT, "--out", out, "--workers", "1", "--no-lobes")
+    sweep_cli(tmp_path / "model", "--grid", grid, "--cut", CUT, "--out", out, "--workers", "1", "--no-lobes", "--steps", "40")
     rows = read_rows(out / "results.csv")
     assert next(r for r in rows if r["pose_id"] == "far_away")["flags"] == "unreachable"  # the grid's twin checks reach
     reachable = [r for r in rows if r["reachable"] == "true"]
     assert len(reachable) == 12 and all(float(r["lowest_fn_std_hz"]) > 0 for r in reachable)
+
+    picked = reachable[:2]
+    (tmp_path / "poses.csv").write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\n" + "".join(f"{r['pose_id']},{r['x_mm']},{r['y_mm']},{r['z_mm']},{r['beta_deg']}\n" for r in picked))
+    done = subprocess.run([sys.executable, "-m", "posedyn", "schedule", tmp_path / "model", "--poses", tmp_path / "poses.csv", "--cut", CUT, "--json"], capture_output=True, text=True, cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    for row, entry in zip(picked, json.loads(done.stdout)):
+        assert entry["pose_id"] == row["pose_id"]
+        assert float(row["critical_depth_mm"]) == pytest.approx(entry["critical_depth_mm"], rel=1e-9)
+        assert float(row["dominant_chatter_hz"]) == pytest.approx(entry["dominant_chatter_hz"], rel=1e-9)
+        assert float(row["field_mt"]) == pytest.approx(entry["absorber"]["field_mt"], rel=1e-9)
+        assert float(row["critical_depth_with_absorber_mm"]) == pytest.approx(entry["critical_depth_with_absorber_mm"], rel=1e-9)
+        assert float(row["dvf_gain_ns_per_m"]) == pytest.approx(entry["controller"]["dvf_gain_ns_per_m"], rel=1e-9)
 
 
 def test_sweep_bad_input_names_the_file(tmp_path):

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from posedyn.errors import InputError
 from posedyn.io.params import read_params, reading
+from posedyn.sle import SleCut
 from posedyn.stability import Cut
 
 
@@ -36,8 +37,6 @@ def read_cut(path: str | os.PathLike) -> tuple[Cut, float, int]:
 
 def read_sle_cut(path: str | os.PathLike):
     """The SLE cut of a cut file's `[sle]` section (None when the file has none)."""
-    from posedyn.sle import SleCut
-
     p = read_params(path)
     if "sle" not in p:
         return None

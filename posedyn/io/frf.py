@@ -182,7 +182,7 @@ def write_frf_csv(frfs: FRFSet, path: str | os.PathLike, quantity: str = "recept
 
 
 def write_frf_uff(frfs: FRFSet, path: str | os.PathLike, quantity: str = "receptance") -> None:
-    import pyuff
+    import pyuff  # optional reader, loaded only for .uff files
 
     path = Path(path)
     pose = ";".join([f"pose_id={frfs.pose_id}"] + [f"{k}={v!r}" for k, v in frfs.pose.items()])
@@ -206,7 +206,7 @@ def write_frf_uff(frfs: FRFSet, path: str | os.PathLike, quantity: str = "recept
 
 
 def read_frf_uff(path: str | os.PathLike) -> FRFSet:
-    import pyuff
+    import pyuff  # optional reader, loaded only for .uff files
 
     path = Path(path)
     name = str(path)

@@ -1,4 +1,4 @@
-"""Pose grids and twin parameter files (TOML).
+"""Pose grids (TOML).
 
 A grid file:
 
@@ -19,13 +19,11 @@ A grid file:
     z_mm = 600
     beta_deg = 10
 
-    [[effects]]                               # optional named effects (posedyn.effects)
+    [[effects]]                               # optional named effects (posedyn.robot.twin_effects)
     name = "device_mass"
     mass_kg = 8
 
-A twin file (`kind = "robot_twin"`): `[robot] urdf, payload_kg`; `[joints]
-stiffness_nm_per_rad = [six values]`; `[modes] zeta, robot_modes_per_direction`;
-`[[spindle_modes]] direction, fn_hz, k_n_per_m, zeta`.
+Twin files are read by `posedyn.io.twin_file`.
 """
 
 from __future__ import annotations
@@ -36,39 +34,11 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from posedyn.campaign import GridPose
-from posedyn.effects import Effect, make_effect
 from posedyn.errors import InputError
 from posedyn.io.params import read_params, reading
 from posedyn.robot import ToolPose
-from posedyn.table import Mode
-from posedyn.twin import TwinParameters
-
-
-@dataclass(frozen=True)
-class TwinSpec:
-    urdf: Path
-    payload_kg: float
-    params: TwinParameters
-
-
-def read_twin(path: str | os.PathLike) -> TwinSpec:
-    path = Path(path)
-    p = read_params(path)
-    with reading(path, "twin file"):
-        robot = p["robot"]
-        urdf = (path.parent / robot["urdf"]).resolve()
-        spindle = {}
-        for item in p.get("spindle_modes", []):
-            mode = Mode(float(item["fn_hz"]), float(item["zeta"]), float(item["k_n_per_m"]))
-            spindle.setdefault(item["direction"], []).append(mode)
-        params = TwinParameters(
-            joint_stiffness_nm_per_rad=tuple(float(k) for k in p["joints"]["stiffness_nm_per_rad"]),
-            zeta=float(p["modes"]["zeta"]),
-            robot_modes_per_direction=int(p["modes"]["robot_modes_per_direction"]),
-            spindle_modes={d: tuple(m) for d, m in spindle.items()},
-        )
-        return TwinSpec(urdf=urdf, payload_kg=float(robot["payload_kg"]), params=params)
+from posedyn.robot.campaign import GridPose
+from posedyn.robot.twin_effects import Effect, make_effect
 
 
 @dataclass(frozen=True)

@@ -15,8 +15,11 @@ import numpy as np
 
 from posedyn import __version__
 from posedyn.errors import InputError
-from posedyn.gp import GP
-from posedyn.gpr import PhysicsPrior, PoseModel
+from posedyn.posemodel import GP
+from posedyn.posemodel import PhysicsPrior, PoseModel
+from posedyn.posemodel import CROSS, parse_target
+from posedyn.robot import Robot
+from posedyn.robot.twin import TwinParameters
 from posedyn.table import Mode
 
 SCHEMA_VERSION = 1
@@ -108,7 +111,6 @@ def load_model(folder: str | os.PathLike) -> PoseModel:
         model.features_ = list(doc["features"])
         model.x_mean_, model.x_scale_ = np.array(doc["x_mean"]), np.array(doc["x_scale"])
         model.targets_ = list(doc["targets"])
-        from posedyn.gpr import CROSS, parse_target
 
         model.cross_ = np.array([parse_target(t)[2] in CROSS for t in model.targets_], dtype=bool)
         model.y_mean_, model.y_scale_ = np.array(doc["y_mean"]), np.array(doc["y_scale"])
@@ -119,9 +121,6 @@ def load_model(folder: str | os.PathLike) -> PoseModel:
         model.training_hash_ = doc["training_data_hash"]
         model.physics_ = doc["physics"]
         if model.physics_ and model.physics_.get("used"):
-            from posedyn.robot import Robot
-            from posedyn.twin import TwinParameters
-
             twin = model.physics_["twin"]
             params = TwinParameters(
                 joint_stiffness_nm_per_rad=tuple(twin["joint_stiffness_nm_per_rad"]),

@@ -4,7 +4,7 @@
 opposite question: one cut and one speed, thousands of structures (one per pose). Structures
 with the same number of modes are stacked here, so that the step matrices, the eigenvalue
 solver and the depth bracketing run once over the whole batch (the same semi-discretization,
-`sdm.stacked_step_matrices`, and the same bracketing, `chatter._critical`, as `StabilityModel`).
+`sdm.stacked_step_matrices`, and the same bracketing, `chatter.critical_crossing`, as `StabilityModel`).
 
 The cutting force sees the structure only through the tool-tip displacement u = Phi_L q (two
 coordinates), so the monodromy matrix is formed on [z_0; u_{-1}; ...; u_{-m}] (N = 2n + 2m)
@@ -27,8 +27,8 @@ import numpy as np
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.errors import InputError
 from posedyn.stability import sdm
-from posedyn.stability.chatter import CriticalDepths, Discretization, _critical, chatter_frequencies
 from posedyn.stability.cutting import Cut, interval_force_matrices, mean_force_matrix
+from posedyn.stability.model import CriticalDepths, Discretization, critical_crossing, chatter_frequencies
 
 #: Batch elements per step-matrix and eigensolver pass: small enough to stay in cache (64: 25 ms
 #: per sweep pose against 34 ms at 500).
@@ -118,7 +118,7 @@ class BatchStability:
 
     def critical_depths(self, frequencies: bool = True, rel_tol: float = 1e-6, guess_m=None, guess_span: float = 2.0, rungs: int | None = None) -> CriticalDepths:
         """Critical depth and dominant chatter frequency of every structure at its speed."""
-        depth, depth_unstable, mu = _critical(self.multipliers, self.scale_m, rel_tol, guess_m, guess_span, rungs)
+        depth, depth_unstable, mu = critical_crossing(self.multipliers, self.scale_m, rel_tol, guess_m, guess_span, rungs)
         count = len(self)
         dominant = np.full(count, np.nan)
         family = [()] * count

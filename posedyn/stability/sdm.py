@@ -204,7 +204,7 @@ def stacked_step_matrices(stiffness: np.ndarray, damping: np.ndarray, w_modal: n
     F0 = np.zeros((m, 2 * n, r, batch))
     F1 = np.zeros((m, 2 * n, r, batch)) if order == 1 else None
     if not cutting.all():
-        free_p, _, _ = _exponentials(wn2, c, dt_s, order=0)
+        free_p, _, _ = exponentials(wn2, c, dt_s, order=0)
         P[~cutting] = free_p.transpose(1, 2, 0)[None]
     idx = np.flatnonzero(cutting)
     if len(idx):
@@ -214,12 +214,12 @@ def stacked_step_matrices(stiffness: np.ndarray, damping: np.ndarray, w_modal: n
         stiff, damp = (wn2 + aw).reshape(-1, n, n), np.broadcast_to(c, aw.shape).reshape(-1, n, n)
         to_layout = lambda a: a.reshape(len(idx), batch, *a.shape[1:]).transpose(0, 2, 3, 1)  # noqa: E731
         if inputs is None:  # F = int exp(A s) E ds a W_i
-            p, g0, g1 = _exponentials(stiff, damp, dt, order)
+            p, g0, g1 = exponentials(stiff, damp, dt, order)
             awf = aw.reshape(-1, n, n)
             g0, g1 = g0 @ awf, (g1 @ awf if order == 1 else None)
         else:  # a Phi_R^T H_i inside the augmented exponential: r columns instead of n
             rows = (np.moveaxis(inputs, 1, 0)[idx] * depth_m[None, :, None, None]).reshape(-1, n, r)
-            p, g0, g1 = _exponentials(stiff, damp, dt, order, inputs=rows)
+            p, g0, g1 = exponentials(stiff, damp, dt, order, inputs=rows)
         P[idx] = to_layout(p)
         F0[idx] = to_layout(g0)
         if order == 1:
@@ -230,7 +230,7 @@ def stacked_step_matrices(stiffness: np.ndarray, damping: np.ndarray, w_modal: n
     return StepMatrices(P, F0 - F1, F1, dt_s)
 
 
-def _exponentials(stiffness: np.ndarray, damping: np.ndarray, dt: np.ndarray, order: int, inputs: np.ndarray | None = None):
+def exponentials(stiffness: np.ndarray, damping: np.ndarray, dt: np.ndarray, order: int, inputs: np.ndarray | None = None):
     """For A = [[0, I], [-K, -C]]: exp(A dt), int_0^dt exp(A s) E ds and int_0^dt exp(A s) E (dt - s) / dt ds
     with E = [[0], [I]] (or [[0], [R]] for given `inputs` R (k, n, r)), batched over K, C (k, n, n)
     and dt (k,), from one augmented exponential."""

@@ -1,0 +1,14 @@
+"""The simulation-versus-measurement gap: measurement campaigns, candidate effects fitted with
+uncertainty, forward selection by information criterion, identifiability, ties and the
+residual that stays unexplained (`analysis`). What predicts the baseline lives with the caller
+(`service.gap`), which may use the absorber."""
+
+from posedyn.gap.analysis import (
+    LIBRARY, CandidateEffect, Fit, GapResult, Measurements, Parameter, analyse, chi2_p, fit, predict, residual_correlates,
+    separating_measurement,
+)
+
+__all__ = [
+    "LIBRARY", "CandidateEffect", "Fit", "GapResult", "Measurements", "Parameter", "analyse", "chi2_p", "fit", "predict",
+    "residual_correlates", "separating_measurement",
+]

@@ -1,0 +1,359 @@
+"""Pose -> modal-parameter regression (seed 004 section 2.1, seed 003 section 4.4).
+
+`PoseModel` follows scikit-learn's estimator contract: the constructor stores parameters,
+`fit(table)` learns (attributes ending in `_`) and returns self, `predict(poses)` answers.
+
+Targets are named `<direction><mode>.<param>` (`x1.fn_hz`, `y2.k_n_per_m`, `x1.zeta`), one per
+(direction, mode) present at every training pose and per parameter. All three parameters are
+positive and modelled as ln(value); a GP's normal prediction N(mu, s^2) in log space maps back
+to the log-normal mean exp(mu + s^2 / 2) and std mean * sqrt(exp(s^2) - 1).
+
+Methods:
+- `stgp`: one GP per target (anisotropic RBF + white noise), targets standardised, seeded
+  restarts of the marginal-likelihood optimisation (`posedyn.posemodel`).
+- `mtgp`: intrinsic coregionalization (seed 003 eq. 28) over groups of at most `max_tasks`
+  targets. Groups are formed from the data: targets are joined greedily in order of the
+  absolute correlation of their standardised training values (>= `min_correlation`), never
+  beyond `max_tasks` per group (seed 003 keeps m <= 3 for training time); the same mode seen
+  in two directions, or fn and k of one mode, end up together when the data say they move
+  together. Targets correlated with nothing stay single-task.
+- `physics`: the twin (`posedyn.robot.twin`) predicts every target at every pose; its six joint
+  stiffness scale factors are fitted first (least squares on ln fn and ln k of the robot
+  modes), then single-task GPs learn the residual ln(measured) - ln(twin). Without the pose
+  information the twin needs (a pose it cannot reach), the model falls back to `stgp` and
+  says so in `physics_`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.optimize
+
+from posedyn.errors import InputError, check_choice
+from posedyn.io import format_modal_table
+from posedyn.posemodel._gp import GP, fit_gp
+from posedyn.robot import direction_rows, tool_pose, twin_modes
+from posedyn.table import DIRECTIONS, JOINT_COLUMNS, ModalTable, PoseSet
+
+METHODS = ("stgp", "mtgp", "physics")
+PARAMS = ("fn_hz", "zeta", "k_n_per_m")
+CROSS = ("k_xy_n_per_m", "k_yx_n_per_m")  # signed: learned as compliance 1 / k in linear space
+
+
+def target_name(direction: str, mode: int, param: str) -> str:
+    return f"{direction}{mode}.{param}"
+
+
+def parse_target(name: str) -> tuple[str, int, str]:
+    head, param = name.split(".")
+    return head[0], int(head[1:]), param
+
+
+def training_hash(table: ModalTable) -> str:
+    """sha256 of the table's canonical CSV text (what the model was trained on)."""
+    return hashlib.sha256(format_modal_table(table).encode("utf-8")).hexdigest()
+
+
+def table_targets(table: ModalTable) -> tuple[list[str], np.ndarray]:
+    """Target names and the (poses x targets) matrix of values, for the (direction, mode) pairs
+    present at every pose."""
+    n = len(table.poses)
+    keys = None
+    for p in range(n):
+        rows = table.pose_index == p
+        present = set(zip(table.direction[rows].tolist(), table.mode[rows].tolist()))
+        keys = present if keys is None else keys & present
+    keys = sorted(keys or (), key=lambda k: (DIRECTIONS.index(k[0]), k[1]))
+    if not keys:
+        raise InputError("at least one (direction, mode) measured at every pose", got="none in common", column="mode")
+    names, columns = [], []
+    lookup = {(int(table.pose_index[i]), table.direction[i], int(table.mode[i])): i for i in range(len(table))}
+    for d, m in keys:
+        for param in PARAMS:
+            names.append(target_name(d, m, param))
+            column = getattr(table, param)
+            columns.append([column[lookup[(p, d, m)]] for p in range(n)])
+        for param in CROSS:
+            if param in table.cross:
+                values = np.array([table.cross[param][lookup[(p, d, m)]] for p in range(n)])
+                if np.all(np.isfinite(values)):
+                    names.append(target_name(d, m, param))
+                    columns.append(values)
+    return names, np.array(columns).T
+
+
+def to_model_space(names: list[str], Y: np.ndarray) -> np.ndarray:
+    """ln(value) for the positive parameters, compliance 1 / k for the signed cross stiffnesses."""
+    cross = np.array([parse_target(t)[2] in CROSS for t in names], dtype=bool)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(cross[None, :], 1.0 / Y, np.log(np.abs(Y)))
+
+
+def select_features(poses: PoseSet, requested: list[str] | None) -> list[str]:
+    """The pose columns to learn from: as requested, or every position/orientation column that
+    varies over the training poses."""
+    columns = poses.numeric_columns()
+    if requested:
+        missing = [c for c in requested if c not in columns]
+        if missing:
+            raise InputError("feature columns present in the table: " + ", ".join(columns), got=missing, column="--features")
+        return list(requested)
+    chosen = [c for c, v in columns.items() if c not in JOINT_COLUMNS and np.ptp(v) > 0]
+    if not chosen:
+        raise InputError("poses that differ in position or orientation (all training poses are the same)", column="pose_id")
+    return chosen
+
+
+def feature_matrix(poses: PoseSet, features: list[str]) -> np.ndarray:
+    columns = poses.numeric_columns()
+    missing = [c for c in features if c not in columns]
+    if missing:
+        raise InputError("the model's feature columns in the poses", got=missing, column=missing[0])
+    return np.column_stack([columns[c] for c in features])
+
+
+def group_targets(Z: np.ndarray, max_tasks: int, min_correlation: float) -> list[list[int]]:
+    """Greedy correlation clustering of target columns into groups of <= max_tasks."""
+    T = Z.shape[1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        C = np.corrcoef(Z, rowvar=False) if T > 1 else np.ones((1, 1))
+    C = np.nan_to_num(np.atleast_2d(C))
+    group = list(range(T))
+    members = {t: [t] for t in range(T)}
+    pairs = sorted(((abs(C[a, b]), a, b) for a in range(T) for b in range(a + 1, T)), reverse=True)
+    for strength, a, b in pairs:
+        if strength < min_correlation:
+            break
+        ga, gb = group[a], group[b]
+        if ga == gb or len(members[ga]) + len(members[gb]) > max_tasks:
+            continue
+        if min(abs(C[i, j]) for i in members[ga] for j in members[gb]) < min_correlation:
+            continue
+        members[ga] += members.pop(gb)
+        for t in members[ga]:
+            group[t] = ga
+    return [sorted(m) for _, m in sorted(members.items())]
+
+
+@dataclass(frozen=True)
+class PhysicsPrior:
+    """The twin used as the prior mean: its parameters (after the fitted stiffness scales) and
+    the robot it runs on."""
+
+    robot: object
+    params: object
+    scales: np.ndarray
+    robot_modes: int
+
+    def log_values(self, poses: PoseSet, targets: list[str]) -> np.ndarray:
+        """ln of the twin's prediction of each target at each pose (NaN where it has none)."""
+        q = pose_joints(self.robot, poses)
+        return _twin_log_values(self.robot, self.params.scaled(self.scales), q, targets, self.robot_modes)
+
+
+def pose_joints(robot, poses: PoseSet) -> np.ndarray:
+    """Joint angles (rad) of each pose: the table's joint columns, else inverse kinematics."""
+    if poses.joints_deg is not None:
+        return np.radians(poses.joints_deg)
+    data = robot.model.createData()
+    return np.array([robot.inverse(tool_pose(poses, i), data) for i in range(len(poses))])
+
+
+def _twin_log_values(robot, params, q: np.ndarray, targets: list[str], robot_modes: int) -> np.ndarray:
+    data = robot.model.createData()
+    out = np.full((len(q), len(targets)), np.nan)
+    parsed = [parse_target(t) for t in targets]
+    for i, qi in enumerate(q):
+        modes = twin_modes(robot, qi, params, data)
+        rows = {d: direction_rows(modes, d, robot_modes) for d in DIRECTIONS}
+        for j, (d, m, param) in enumerate(parsed):
+            if m <= len(rows[d]) and param in PARAMS:
+                out[i, j] = np.log(rows[d][m - 1][PARAMS.index(param)])
+    return out
+
+
+class PoseModel:
+    """Pose -> tool-tip modal parameters with uncertainty (see the module docstring)."""
+
+    def __init__(
+        self,
+        method: str = "stgp",
+        features: list[str] | None = None,
+        n_restarts: int = 1,
+        random_state: int = 0,
+        max_tasks: int = 3,
+        min_correlation: float = 0.5,
+        twin=None,
+        workers: int | None = None,
+    ):
+        self.method = method
+        self.workers = workers
+        self.features = features
+        self.n_restarts = n_restarts
+        self.random_state = random_state
+        self.max_tasks = max_tasks
+        self.min_correlation = min_correlation
+        self.twin = twin  # (Robot, TwinParameters) for method "physics"
+
+    def _validate(self):
+        check_choice("method", self.method, METHODS)
+        if self.method == "physics" and self.twin is None:
+            raise InputError("a twin (robot, parameters) for the physics method", column="twin")
+        if not 1 <= self.max_tasks <= 6:
+            raise InputError("max_tasks between 1 and 6", got=self.max_tasks, column="max_tasks")
+
+    def fit(self, table: ModalTable) -> "PoseModel":
+        self._validate()
+        poses = table.poses
+        if len(poses) < 2:
+            raise InputError("at least two training poses", got=len(poses), column="pose_id")
+        self.features_ = select_features(poses, self.features)
+        X = feature_matrix(poses, self.features_)
+        self.x_mean_ = X.mean(axis=0)
+        self.x_scale_ = np.where(X.std(axis=0) > 0, X.std(axis=0), 1.0)
+        self.targets_, Y = table_targets(table)
+        self.cross_ = np.array([parse_target(t)[2] in CROSS for t in self.targets_], dtype=bool)
+        logY = to_model_space(self.targets_, Y)
+        self.physics_ = None
+        prior = np.zeros_like(logY)
+        if self.method == "physics":
+            prior, self.physics_ = self._fit_prior(poses, logY)
+        residual = logY - prior
+        self.y_mean_ = residual.mean(axis=0)
+        spread = residual.std(axis=0)
+        self.y_scale_ = np.where(spread > 0, spread, 1.0)
+        Z = (residual - self.y_mean_) / self.y_scale_
+        if self.method == "mtgp":
+            self.groups_ = group_targets(Z, self.max_tasks, self.min_correlation)
+        else:
+            self.groups_ = [[t] for t in range(len(self.targets_))]
+        self.X_train_ = (X - self.x_mean_) / self.x_scale_
+        self.Z_train_ = Z
+        with ThreadPoolExecutor(self.workers or os.cpu_count() or 1) as pool:  # LAPACK releases the GIL
+            self.gps_ = list(pool.map(self._fit_group, self.groups_, range(len(self.groups_))))
+        self.n_poses_ = len(poses)
+        self.training_hash_ = training_hash(table)
+        return self
+
+    def _fit_prior(self, poses: PoseSet, logY: np.ndarray):
+        robot, params = self.twin
+        count = params.robot_modes_per_direction
+        try:
+            q = pose_joints(robot, poses)
+        except InputError as exc:
+            return np.zeros_like(logY), {"used": False, "reason": str(exc)}
+        fit_cols = [j for j, t in enumerate(self.targets_) if parse_target(t)[2] in ("fn_hz", "k_n_per_m")]
+
+        def residual(log_scale):
+            twin = _twin_log_values(robot, params.scaled(np.exp(log_scale)), q, [self.targets_[j] for j in fit_cols], count)
+            r = logY[:, fit_cols] - twin
+            return np.nan_to_num(r[:, np.isfinite(twin).all(axis=0)]).ravel()
+
+        result = scipy.optimize.least_squares(residual, np.zeros(6), bounds=(np.log(1 / 3), np.log(3)), diff_step=1e-4, x_scale=0.1)
+        scales = np.exp(result.x)
+        prior_model = PhysicsPrior(robot, params, scales, count)
+        prior = _twin_log_values(robot, params.scaled(scales), q, self.targets_, count)
+        has = np.isfinite(prior).all(axis=0) & ~self.cross_
+        prior[:, ~has] = 0.0
+        self.prior_targets_ = has
+        self.prior_model_ = prior_model
+        return prior, {"used": True, "stiffness_scales": scales.tolist(), "targets_with_prior": int(has.sum())}
+
+    def _fit_group(self, group: list[int], k: int) -> GP:
+        return fit_gp(self.X_train_, self.Z_train_[:, group], restarts=self.n_restarts, seed=self.random_state + k)
+
+    def predict_log(self, poses: PoseSet):
+        """Mean and std of ln(value) for every target at every pose, (n, T) each."""
+        X = (feature_matrix(poses, self.features_) - self.x_mean_) / self.x_scale_
+        n, T = len(X), len(self.targets_)
+        mean, std = np.empty((n, T)), np.empty((n, T))
+        for group, gp in zip(self.groups_, self.gps_):
+            mean[:, group], std[:, group] = gp.predict(X, return_std=True)
+        mean = mean * self.y_scale_ + self.y_mean_
+        std = std * self.y_scale_
+        if self.physics_ and self.physics_.get("used"):
+            prior = self.prior_model_.log_values(poses, self.targets_)
+            mean = mean + np.where(self.prior_targets_, np.nan_to_num(prior), 0.0)
+        return mean, std
+
+    def predict(self, poses: PoseSet, return_std: bool = False):
+        """Mean (and std) of every target at every pose, original units, (n, T): log-normal
+        moments for the positive parameters; for a cross stiffness k = 1 / c with c normal,
+        1 / mu and s / mu^2 (first order)."""
+        mu, s = self.predict_log(poses)
+        cross = getattr(self, "cross_", np.zeros(len(self.targets_), dtype=bool))
+        mean = np.where(cross, 1.0 / np.where(mu != 0, mu, np.inf), np.exp(mu + 0.5 * s**2))
+        if not return_std:
+            return mean
+        std = np.where(cross, s / np.where(mu != 0, mu, np.inf) ** 2, mean * np.sqrt(np.expm1(s**2)))
+        return mean, std
+
+    def predict_table(self, poses: PoseSet) -> ModalTable:
+        """Predictions as a modal table (std_* columns hold the predictive std)."""
+        mean, std = self.predict(poses, return_std=True)
+        keys = []
+        for t in self.targets_:
+            d, m, _ = parse_target(t)
+            if (d, m) not in keys:
+                keys.append((d, m))
+        rows = {k: [] for k in ("pose_index", "direction", "mode", "fn_hz", "zeta", "k_n_per_m")}
+        stds = {"std_fn_hz": [], "std_zeta": [], "std_k_n_per_m": []}
+        index = {t: j for j, t in enumerate(self.targets_)}
+        cross_names = [c for c in CROSS if any(t.endswith("." + c) for t in self.targets_)]
+        cross = {c: [] for c in cross_names}
+        for p in range(len(poses)):
+            for d, m in keys:
+                rows["pose_index"].append(p)
+                rows["direction"].append(d)
+                rows["mode"].append(m)
+                for param in PARAMS:
+                    j = index[target_name(d, m, param)]
+                    value = mean[p, j]
+                    if param == "zeta":
+                        value = min(value, 0.999)
+                    rows[param].append(value)
+                    stds["std_" + param].append(std[p, j])
+                for c in cross_names:
+                    j = index.get(target_name(d, m, c))
+                    cross[c].append(mean[p, j] if j is not None else np.nan)
+        return ModalTable(poses=poses, std=stds, source=("predicted by posedyn " + self.method,) * len(rows["fn_hz"]), cross=cross, **rows)
+
+
+def r2_score(predicted: np.ndarray, actual: np.ndarray) -> float:
+    """Coefficient of determination (seed 003 eq. 31)."""
+    ss = np.sum((actual - actual.mean()) ** 2)
+    return float(1.0 - np.sum((predicted - actual) ** 2) / ss) if ss > 0 else float("nan")
+
+
+def cross_validate(make_model, table: ModalTable, folds: int = 5, seed: int = 0) -> dict:
+    """k-fold cross-validation over poses (seed 003 section 5.2): per target the mean and
+    sample standard deviation of R^2 over the folds and the RMSE over all held-out poses."""
+    n = len(table.poses)
+    if not 2 <= folds <= n:
+        raise InputError(f"between 2 and {n} folds", got=folds, column="--cv")
+    order = np.random.default_rng(seed).permutation(n)
+    parts = np.array_split(order, folds)
+    names, Y = table_targets(table)
+    predicted = np.full_like(Y, np.nan)
+    r2 = []
+    for test in parts:
+        train = np.setdiff1d(order, test)
+        model = make_model().fit(table.select_poses(train))
+        index = [model.targets_.index(t) for t in names]
+        out = model.predict(table.select_poses(test).poses)[:, index]
+        predicted[test] = out
+        r2.append([r2_score(out[:, j], Y[test, j]) for j in range(len(names))])
+    r2 = np.array(r2)
+    return {
+        name: {
+            "r2_mean": float(np.nanmean(r2[:, j])),
+            "r2_std": float(np.nanstd(r2[:, j], ddof=1)),
+            "rmse": float(np.sqrt(np.mean((predicted[:, j] - Y[:, j]) ** 2))),
+        }
+        for j, name in enumerate(names)
+    }

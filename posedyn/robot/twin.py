@@ -1,0 +1,135 @@
+"""Elastodynamic twin of the robot at a pose: lumped joint stiffness on rigid links.
+
+    M(q) theta'' + C theta' + K_theta theta = J(q)^T f
+
+with M(q) from Pinocchio's composite rigid-body algorithm (links, spindle payload), K_theta =
+diag(k_j) joint stiffnesses and modal damping zeta_r. The generalized eigenproblem
+K_theta phi = w^2 M phi (phi^T M phi = 1) gives the robot modes; their tool-tip shapes
+u_r = J_lin(q) phi_r make the tool-tip receptance
+
+    H(w) = sum_r u_r u_r^T / (w_r^2 - w^2 + 2 i zeta_r w_r w)
+
+so mode r seen in direction d has modal stiffness k_rd = w_r^2 / u_rd^2 (seed 004 eq. 5,
+seed 003 eqs. 15-17). Pose-independent spindle-tool modes (seed 001 Table 4 style) are added
+per direction. Nothing here does I/O.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import pinocchio as pin
+import scipy.linalg
+
+from posedyn.dynamics import ToolTipDynamics
+from posedyn.errors import InputError
+from posedyn.robot.kinematics import Robot
+from posedyn.table import DIRECTIONS, Mode
+
+
+@dataclass(frozen=True)
+class TwinParameters:
+    """Joint stiffnesses (N m / rad, A1..A6), robot-mode damping ratio, pose-independent
+    spindle-tool modes per direction, how many robot modes each direction reports, and an
+    extra point mass on the flange (device mounted on the spindle housing; 0 by default)."""
+
+    joint_stiffness_nm_per_rad: tuple[float, ...] = (3.0e6, 4.0e6, 2.0e6, 6.0e5, 6.0e5, 4.5e5)
+    zeta: float = 0.03
+    spindle_modes: dict = field(default_factory=dict)
+    robot_modes_per_direction: int = 3
+    flange_mass_kg: float = 0.0
+    flange_mass_offset_m: tuple[float, float, float] = (0.15, 0.0, 0.12)
+
+    def __post_init__(self):
+        k = np.asarray(self.joint_stiffness_nm_per_rad, dtype=float)
+        if k.shape != (6,) or not np.all(np.isfinite(k) & (k > 0)):
+            raise InputError("six joint stiffnesses > 0 N m/rad", got=self.joint_stiffness_nm_per_rad, column="joint_stiffness_nm_per_rad")
+        if not 0 < self.zeta < 1:
+            raise InputError("a damping ratio in (0, 1)", got=self.zeta, column="zeta")
+        if not 1 <= self.robot_modes_per_direction <= 6:
+            raise InputError("1 to 6 robot modes per direction", got=self.robot_modes_per_direction, column="robot_modes_per_direction")
+        if not (np.isfinite(self.flange_mass_kg) and self.flange_mass_kg >= 0):
+            raise InputError("a flange mass >= 0 kg", got=self.flange_mass_kg, column="flange_mass_kg")
+        for d, modes in self.spindle_modes.items():
+            if d not in DIRECTIONS or not all(isinstance(m, Mode) for m in modes):
+                raise InputError("spindle modes as {direction: (Mode, ...)}", got=d, column="spindle_modes")
+
+    def scaled(self, stiffness_scale) -> "TwinParameters":
+        """The same parameters with each joint stiffness multiplied by a factor."""
+        scale = np.broadcast_to(np.asarray(stiffness_scale, dtype=float), (6,))
+        return replace(self, joint_stiffness_nm_per_rad=tuple(np.asarray(self.joint_stiffness_nm_per_rad) * scale))
+
+
+@dataclass(frozen=True, eq=False)
+class TwinModes:
+    """Robot modes at one pose: fn_hz (6,), zeta (6,), tool-tip shapes (3, 6) in 1/sqrt(kg)
+    (base-frame x, y, z), plus the pose-independent spindle modes."""
+
+    fn_hz: np.ndarray
+    zeta: np.ndarray
+    tip_shapes: np.ndarray
+    spindle_modes: dict
+
+    def stiffness(self, direction: str) -> np.ndarray:
+        """k_rd = w_r^2 / u_rd^2 for every robot mode r (N/m; inf where the mode does not show)."""
+        u = self.tip_shapes[DIRECTIONS.index(direction)]
+        with np.errstate(divide="ignore"):
+            return (2 * np.pi * self.fn_hz) ** 2 / u**2
+
+    def dynamics(self, include_spindle: bool = True) -> ToolTipDynamics:
+        """Tool-tip x-y modal model with the full (coupled) robot mode shapes."""
+        fn = list(self.fn_hz)
+        zeta = list(self.zeta)
+        shapes = [self.tip_shapes[:2]]
+        if include_spindle:
+            for d in ("x", "y"):
+                for m in self.spindle_modes.get(d, ()):
+                    fn.append(m.fn_hz)
+                    zeta.append(m.zeta)
+                    column = np.zeros((2, 1))
+                    column[DIRECTIONS.index(d), 0] = 1.0 / np.sqrt(m.m_kg)
+                    shapes.append(column)
+        return ToolTipDynamics(fn_hz=fn, zeta=zeta, shapes=np.hstack(shapes))
+
+
+def mass_matrix(robot: Robot, q: np.ndarray, params: TwinParameters, data: pin.Data | None = None) -> np.ndarray:
+    """Joint-space mass matrix M(q) (CRBA, symmetrised), with the optional flange point mass
+    added through its Jacobian: M += m J_p^T J_p."""
+    data = data or robot.model.createData()
+    M = pin.crba(robot.model, data, np.asarray(q, dtype=float))
+    M = np.triu(M) + np.triu(M, 1).T
+    if params.flange_mass_kg > 0:
+        M = M + params.flange_mass_kg * _point_jacobian(robot, q, params.flange_mass_offset_m, data).T @ _point_jacobian(robot, q, params.flange_mass_offset_m, data)
+    return M
+
+
+def _point_jacobian(robot: Robot, q, offset_m, data) -> np.ndarray:
+    """Linear Jacobian (3 x 6) of a point fixed to the last link at `offset_m` (flange frame)."""
+    pin.computeJointJacobians(robot.model, data, np.asarray(q, dtype=float))
+    pin.updateFramePlacements(robot.model, data)
+    J = pin.getJointJacobian(robot.model, data, 6, pin.LOCAL)
+    placement = pin.SE3(np.eye(3), np.asarray(offset_m, dtype=float))
+    J_point = placement.toActionMatrixInverse() @ J  # local frame of the point
+    R = (data.oMi[6] * placement).rotation
+    return R @ J_point[:3]
+
+
+def normal_modes(M: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """K phi = w^2 M phi with phi^T M phi = I: squared angular frequencies (ascending) and shapes."""
+    return scipy.linalg.eigh(K, M)
+
+
+def twin_modes(robot: Robot, q: np.ndarray, params: TwinParameters, data: pin.Data | None = None) -> TwinModes:
+    """Modes of the robot at joint angles q (rad)."""
+    data = data or robot.model.createData()
+    q = np.asarray(q, dtype=float)
+    M = mass_matrix(robot, q, params, data)
+    w2, phi = normal_modes(M, np.diag(params.joint_stiffness_nm_per_rad))
+    J = robot.jacobian(q, data)[:3]
+    return TwinModes(
+        fn_hz=np.sqrt(w2) / (2 * np.pi),
+        zeta=np.full(6, params.zeta),
+        tip_shapes=J @ phi,
+        spindle_modes=dict(params.spindle_modes),
+    )

@@ -1,0 +1,62 @@
+"""The `posedyn` command line, the one CLI of the project (`posedyn ...` and `python -m posedyn
+...` run this `main`): each module here parses one family of commands' flags, calls the
+library, and prints a table or `--json`. No library module imports this package.
+
+Bad input anywhere ends in one line on stderr (`error: <file>, row <r> (line <l>), column
+'<c>': expected ...`) and exit status 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Optional
+
+import typer
+
+from posedyn import __version__
+from posedyn.errors import InputError
+from service.cli import absorber, control, data, fit, gap, posemodel, serve, sle, stability, sweep, twin
+
+app = typer.Typer(
+    help="Pose-dependent tool-tip dynamics, chatter prediction and absorber/controller schedules for robotic milling.",
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    add_completion=False,
+)
+app.add_typer(data.app, name="data")
+app.add_typer(twin.app, name="twin")
+app.add_typer(absorber.app, name="absorber")
+app.add_typer(control.app, name="control")
+app.command("schedule")(absorber.schedule)
+app.command("fit")(fit.fit)
+app.command("train")(posemodel.train)
+app.command("predict")(posemodel.predict)
+app.command("chatter")(stability.chatter)
+app.command("lobes")(stability.lobes)
+app.command("sle")(sle.sle)
+app.command("sweep")(sweep.sweep)
+app.command("serve")(serve.serve)
+app.command("query")(serve.query)
+app.command("gap")(gap.gap)
+app.command("gap-campaign")(gap.gap_campaign)
+
+
+def _version(value: bool):
+    if value:
+        print(f"posedyn {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Print the version and exit."),
+):
+    pass
+
+
+def main(argv: Optional[list[str]] = None) -> None:
+    try:
+        app(args=argv, prog_name="posedyn")
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        sys.exit(2)

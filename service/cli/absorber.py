@@ -1,0 +1,141 @@
+"""`posedyn absorber tune|field` and `posedyn schedule` (the per-pose chain, `absorber.chain`)."""
+
+from __future__ import annotations
+
+import json
+from enum import Enum
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.table import Table
+
+from absorber.chain import ScheduleConfig, schedule_entries
+from absorber.files import read_absorber, read_actuator
+from absorber.tuning import Host, absolute_limit_m, min_real_part, tune_sims, uncontrolled_min_real_part
+from posedyn.errors import InputError
+from posedyn.io.atomic import write_text_atomic
+from posedyn.io.cut import read_cut
+from posedyn.stability import Cut, mean_force_matrix
+from service.cli.common import Milling, console, finite_or_none, modal_table_for, print_json
+
+app = typer.Typer(help="MRF absorber: optimal tuning, field for a target frequency.", no_args_is_help=True)
+
+
+class Layout(str, Enum):
+    tmd = "tmd"
+    c3 = "idva-c3"
+    c4 = "idva-c4"
+    c5 = "idva-c5"
+    c6 = "idva-c6"
+
+
+class Policy(str, Enum):
+    match = "match"
+    sims = "sims"
+
+
+@app.command("tune")
+def tune(
+    host_fn_hz: float = typer.Option(..., "--host-fn-hz"),
+    host_k_n_per_m: float = typer.Option(..., "--host-k-n-per-m"),
+    host_zeta: float = typer.Option(..., "--host-zeta"),
+    mass_ratio: float = typer.Option(..., "--mass-ratio"),
+    layout: Layout = typer.Option(..., "--layout"),
+    teeth: int = typer.Option(..., "--teeth"),
+    kt_mpa: float = typer.Option(..., "--kt-mpa"),
+    kn_mpa: float = typer.Option(..., "--kn-mpa"),
+    radial_immersion: float = typer.Option(..., "--radial-immersion"),
+    milling: Milling = typer.Option(Milling.down, "--milling"),
+    seed: int = typer.Option(0, "--seed"),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Optimal absorber on a host mode (seed 002 eq. 18) and the absolute stability limits."""
+    host = Host(host_fn_hz, host_k_n_per_m, host_zeta)
+    cut = Cut(teeth=teeth, kt_pa=kt_mpa * 1e6, kn_pa=kn_mpa * 1e6, radial_immersion=radial_immersion, milling=milling.value)
+    h = mean_force_matrix(cut)[1, 1]  # the host mode is the flexible direction y, x rigid (seed 002)
+    if h <= 0:
+        raise InputError("a cut whose mean y directional coefficient is positive (seed 002's case)", got=h, column="--radial-immersion")
+    tuned = tune_sims(layout.value, mass_ratio, host_zeta, seed=seed)
+    out = {
+        "layout": layout.value,
+        "gamma": float(tuned.gamma),
+        "zeta_a": float(tuned.zeta_a),
+        "delta": None if tuned.delta is None else float(tuned.delta),
+        "eta": None if tuned.eta is None else float(tuned.eta),
+        "absolute_limit_mm": finite_or_none(absolute_limit_m(min_real_part(tuned, host_zeta), host, h) * 1e3),
+        "uncontrolled_limit_mm": finite_or_none(absolute_limit_m(uncontrolled_min_real_part(host_zeta), host, h) * 1e3),
+    }
+    if as_json:
+        print_json(out)
+        return
+    for key, value in out.items():
+        console.print(f"{key:24s} {value}")
+
+
+@app.command("field")
+def field_cmd(
+    target_hz: float = typer.Option(..., "--target-hz"),
+    absorber: Optional[Path] = typer.Option(None, "--absorber", help="Absorber file (default: seed 004's design)."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """The coil field that tunes the MRF absorber to a frequency."""
+    a = read_absorber(absorber)
+    setting = a.field_for_frequency(target_hz, clamp=True)
+    out = {
+        "target_hz": target_hz,
+        "field_mt": setting.field_t * 1e3,
+        "storage_modulus_pa": a.storage_modulus_pa(setting.field_t),
+        "feasible": setting.feasible,
+        "range_hz": list(a.range_hz),
+    }
+    if as_json:
+        print_json(out)
+        return
+    state = "" if setting.feasible else f" (outside {a.range_hz[0]:.2f}-{a.range_hz[1]:.2f} Hz: clamped)"
+    console.print(f"{target_hz:g} Hz -> {out['field_mt']:.2f} mT, G1 = {out['storage_modulus_pa']:.4g} Pa{state}")
+
+
+def schedule(
+    model_dir: Optional[Path] = typer.Argument(None, help="Model directory (or give --modes)."),
+    modes: Optional[Path] = typer.Option(None, "--modes", help="Modal table instead of a model."),
+    poses: Path = typer.Option(..., "--poses", help="Poses to schedule (CSV with the pose columns)."),
+    cut: Path = typer.Option(..., "--cut", help="Cut file (TOML)."),
+    absorber: Optional[Path] = typer.Option(None, "--absorber", help="Absorber file (default: seed 004's design)."),
+    policy: Policy = typer.Option(Policy.match, "--policy"),
+    actuator: Optional[Path] = typer.Option(None, "--actuator", help="Actuator file for the controller field (default: seed 000's)."),
+    out: Optional[Path] = typer.Option(None, "--out", help="Write the schedule (JSON)."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Per-pose absorber schedule: chatter, target frequency, field, current, depths."""
+    the_cut, rpm, steps = read_cut(cut)
+    config = ScheduleConfig(the_cut, rpm, read_absorber(absorber), control=read_actuator(actuator), policy=policy.value, steps=steps)
+    entries = schedule_entries(modal_table_for(model_dir, modes, poses), config)
+    if out is not None:
+        _write_json(out, entries)
+    if as_json:
+        print_json(entries)
+        return
+    t = Table(title=f"absorber schedule ({policy.value}) at {rpm:g} rpm", title_justify="left")
+    for c in ("pose", "critical mm", "chatter Hz", "target Hz", "field mT", "current A", "feasible", "with absorber mm"):
+        t.add_column(c, justify="right")
+    for e in entries:
+        a = e["absorber"]
+        t.add_row(
+            e["pose_id"], _fmt(e["critical_depth_mm"]), f"{e['dominant_chatter_hz']:.2f}", f"{a['target_hz']:.2f}", f"{a['field_mt']:.1f}",
+            _fmt(a["current_a"]), "yes" if a["feasible"] else "NO", _fmt(e["critical_depth_with_absorber_mm"]),
+        )
+    console.print(t)
+    if out is not None:
+        console.print(f"wrote {out}")
+
+
+def _fmt(value):
+    return "-" if value is None else f"{value:.3g}"
+
+
+def _write_json(path: Path, value) -> None:
+    write_text_atomic(path, json.dumps(value, indent=2, allow_nan=False) + "\n")
+
+
+

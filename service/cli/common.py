@@ -1,0 +1,47 @@
+"""What the commands share: output helpers and the modes at requested poses."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from enum import Enum
+
+from pathlib import Path
+from typing import Optional
+
+from rich.console import Console
+
+from posedyn.errors import InputError
+from posedyn.io import read_modal_table, read_pose_table
+from posedyn.io.model_dir import load_model
+
+console = Console(width=None if sys.stdout.isatty() else 140)
+
+
+def finite_or_none(value: float):
+    """JSON has no inf or NaN: a depth that never chatters is null."""
+    return float(value) if math.isfinite(value) else None
+
+
+def print_json(value) -> None:
+    print(json.dumps(value, indent=2, allow_nan=False))
+
+
+class Milling(str, Enum):
+    down = "down"
+    up = "up"
+
+
+def modal_table_for(model_dir: Optional[Path], modes: Optional[Path], poses: Path):
+    """The modes at the requested poses: rows of a modal table, or a model's predictions."""
+    if (model_dir is None) == (modes is None):
+        raise InputError("either MODEL_DIR or --modes MODAL.csv", column="--modes")
+    pose_set = read_pose_table(poses)
+    if modes is not None:
+        table = read_modal_table(modes)
+        missing = [p for p in pose_set.pose_id if p not in table.poses.pose_id]
+        if missing:
+            raise InputError("pose_ids present in the modal table", got=missing[:3], file=str(poses), column="pose_id")
+        return table.select_poses([table.poses.index(p) for p in pose_set.pose_id])
+    return load_model(model_dir).predict_table(pose_set)

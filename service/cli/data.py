@@ -1,0 +1,90 @@
+"""`posedyn data`: validate and summarise modal-test tables and parameter files."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+from rich.table import Table
+
+from posedyn.errors import InputError
+from posedyn.io import flatten, read_modal_table, read_params
+from posedyn.io.shipped import DATASETS
+from service.cli.common import console, print_json
+
+app = typer.Typer(help="Validate and summarise modal-test tables and parameter files.", no_args_is_help=True)
+out = console
+
+
+MODAL_COLUMNS = ("rows", "poses", "directions", "modes", "fn_hz", "zeta", "k_n_per_m")
+
+
+def _modal_summary_table(title: str, summaries: dict[str, dict]) -> Table:
+    """One row per table: counts and parameter ranges."""
+    table = Table(title=title, title_justify="left")
+    table.add_column("file", no_wrap=True)
+    for column in MODAL_COLUMNS:
+        table.add_column(column, justify="right" if column in ("rows", "poses") else "left")
+    span = lambda lo_hi, fmt: f"{lo_hi[0]:{fmt}} .. {lo_hi[1]:{fmt}}"  # noqa: E731
+    for name, s in summaries.items():
+        r = s["ranges"]
+        table.add_row(
+            name,
+            str(s["rows"]),
+            str(s["poses"]),
+            ",".join(s["directions"]),
+            ", ".join(f"{d}: {n}" for d, n in s["modes"].items()),
+            span(r["fn_hz"], ".4g"),
+            span(r["zeta"], ".3g"),
+            span(r["k_n_per_m"], ".3g"),
+        )
+    return table
+
+
+@app.command("check")
+def data_check(
+    file: Path = typer.Argument(..., help="Modal-test table (CSV)."),
+    as_json: bool = typer.Option(False, "--json", help="Print {rows, poses, directions, modes} as JSON."),
+):
+    """Validate a modal-test table and summarise it. Exit 0 when valid, 2 when not."""
+    summary = read_modal_table(file).summary()
+    if as_json:
+        print_json({k: summary[k] for k in ("rows", "poses", "directions", "modes")})
+    else:
+        out.print(_modal_summary_table("valid modal-test table", {str(file): summary}))
+
+
+@app.command("summary")
+def data_summary(
+    folder: Path = typer.Argument(DATASETS, help="Folder to walk (CSV modal tables and TOML parameter files; default: the shipped data)."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object per file."),
+):
+    """Validate every modal table (*.csv) and parameter file (*.toml) under a folder."""
+    if not folder.is_dir():
+        raise InputError("a folder", got=str(folder))
+    files = sorted(p for p in folder.rglob("*") if p.suffix in (".csv", ".toml"))
+    if not files:
+        raise InputError("at least one .csv or .toml file", got="none", file=str(folder))
+    report = []
+    for path in files:
+        if path.suffix == ".csv":
+            report.append({"file": str(path), "kind": "modal_table", **read_modal_table(path).summary()})
+        else:
+            params = read_params(path)
+            values = {k: v for k, v in flatten(params).items() if not k.startswith("meta.")}
+            report.append({"file": str(path), "kind": params["meta"]["kind"], "source": params["meta"]["source"], "values": values})
+    if as_json:
+        print_json(report)
+        return
+    out.print(f"[bold]{len(files)} files under {folder}/ are valid[/bold]")
+    tables = {item["file"]: item for item in report if item["kind"] == "modal_table"}
+    if tables:
+        out.print(_modal_summary_table("Modal-test tables (one row per pose x direction x mode)", tables))
+    for item in report:
+        if item["kind"] != "modal_table":
+            table = Table(title=f"{item['file']} ({item['kind']})", caption=item["source"], title_justify="left")
+            table.add_column("parameter")
+            table.add_column("value", justify="right")
+            for key, value in item["values"].items():
+                table.add_row(key, f"{value:g}" if isinstance(value, float) else str(value))
+            out.print(table)

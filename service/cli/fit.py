@@ -1,0 +1,150 @@
+"""`posedyn fit`: modal tables from measured FRFs (CSV or UFF)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import typer
+
+from posedyn.errors import InputError
+from posedyn.identify import direct_modal_parameters, matrix_modal_fit
+from posedyn.identify import lscf_poles
+from posedyn.identify import IdentifiedMode, lsfd
+from posedyn.io import write_modal_table
+from posedyn.io.frf import FRFSet, read_frf
+from posedyn.table import ModalTable, PoseSet
+from service.cli.common import console, print_json
+
+
+def fit_table(frfs, fmin_hz=None, fmax_hz=None, max_order: int = 40, modes: Optional[int] = None):
+    """A ModalTable (one pose per FRF set) and, per pose, what the fits found (for plots)."""
+    rows = {k: [] for k in ("pose_index", "direction", "mode", "fn_hz", "zeta", "k_n_per_m")}
+    std = {"std_fn_hz": [], "std_zeta": [], "std_k_n_per_m": []}
+    cross = {"k_xy_n_per_m": [], "k_yx_n_per_m": []}
+    fits = []
+    has_cross = False
+    for p, frf in enumerate(frfs):
+        f = frf.frequency_hz
+        found = {}
+        if all(n in frf.frf for n in ("h_xx", "h_xy", "h_yx", "h_yy")):
+            coupled, rebuilt = matrix_modal_fit(f, frf.frf, fmin_hz, fmax_hz, max_order)
+            coupled = coupled[:modes] if modes else coupled
+            has_cross = True
+            for m, mode in enumerate(coupled, 1):
+                w2 = (2 * math.pi * mode["fn_hz"]) ** 2
+                (lx, ly), (rx, ry) = mode["shape_left"], mode["shape_right"]
+                for d, k_direct, k_cross, name in (("x", w2 / (lx * rx), w2 / (lx * ry), "k_xy_n_per_m"), ("y", w2 / (ly * ry), w2 / (ly * rx), "k_yx_n_per_m")):
+                    rows["pose_index"].append(p)
+                    rows["direction"].append(d)
+                    rows["mode"].append(m)
+                    rows["fn_hz"].append(mode["fn_hz"])
+                    rows["zeta"].append(mode["zeta"])
+                    rows["k_n_per_m"].append(abs(k_direct))
+                    for key in std:
+                        std[key].append(np.nan)
+                    cross["k_xy_n_per_m"].append(k_cross if name == "k_xy_n_per_m" else np.nan)
+                    cross["k_yx_n_per_m"].append(k_cross if name == "k_yx_n_per_m" else np.nan)
+            found["matrix"] = (coupled, rebuilt)
+        else:
+            for d in "xyz":
+                name = f"h_{d}{d}"
+                if name not in frf.frf:
+                    continue
+                params = direct_modal_parameters(f, frf.frf[name], fmin_hz, fmax_hz, max_order)
+                params = params[:modes] if modes else params
+                found[name] = params
+                for m, par in enumerate(params, 1):
+                    rows["pose_index"].append(p)
+                    rows["direction"].append(d)
+                    rows["mode"].append(m)
+                    for key in ("fn_hz", "zeta", "k_n_per_m"):
+                        rows[key].append(par[key])
+                    for key in std:
+                        std[key].append(par[key])
+                    for key in cross:
+                        cross[key].append(np.nan)
+            if not found:
+                raise InputError("direct FRFs (h_xx, h_yy, h_zz) or the x-y matrix", got=sorted(frf.frf), file=frf.source)
+        fits.append(found)
+    orientation = "abc" if any("a_deg" in f.pose for f in frfs) else "beta"
+    angles = [[f.pose.get(k, 0.0) for k in (("a_deg", "b_deg", "c_deg") if orientation == "abc" else ("beta_deg",))] for f in frfs]
+    poses = PoseSet(
+        pose_id=tuple(f.pose_id for f in frfs),
+        position_mm=np.array([[f.pose.get(k, 0.0) for k in ("x_mm", "y_mm", "z_mm")] for f in frfs]),
+        orientation=orientation,
+        orientation_deg=np.array(angles),
+    )
+    table = ModalTable(poses=poses, std={k: v for k, v in std.items() if not np.all(np.isnan(v))}, cross=cross if has_cross else {}, source=("posedyn fit",) * len(rows["fn_hz"]), **rows)
+    return table, fits
+
+
+def fit(
+    files: list[Path] = typer.Argument(..., help="FRF files (CSV or .uff/.unv), one pose each (files with the same pose_id are merged)."),
+    out: Path = typer.Option(..., "--out", help="Modal table to write (CSV)."),
+    fmin_hz: Optional[float] = typer.Option(None, "--fmin-hz"),
+    fmax_hz: Optional[float] = typer.Option(None, "--fmax-hz"),
+    modes: Optional[int] = typer.Option(None, "--modes", help="Keep at most this many modes per direction (lowest first)."),
+    max_order: int = typer.Option(40, "--max-order", help="Highest model order of the stabilization diagram."),
+    plot: Optional[Path] = typer.Option(None, "--plot", help="Folder for stabilization diagrams and measured-versus-fitted FRF plots."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Identify modes (fn, zeta, k with uncertainty; cross-coupling from an x-y FRF matrix) and write a modal table."""
+    merged: dict[str, FRFSet] = {}
+    for path in files:
+        frf = read_frf(path)
+        if frf.pose_id in merged:
+            base = merged[frf.pose_id]
+            if not np.array_equal(base.frequency_hz, frf.frequency_hz):
+                raise InputError("the same frequencies as the other files of this pose", file=str(path), column="frequency_hz")
+            frf = FRFSet(base.frequency_hz, {**base.frf, **frf.frf}, {**base.coherence, **frf.coherence}, frf.pose_id, {**base.pose, **frf.pose}, frf.source)
+        merged[frf.pose_id] = frf
+    frfs = list(merged.values())
+    table, fits = fit_table(frfs, fmin_hz, fmax_hz, max_order, modes)
+    write_modal_table(table, out)
+    if plot is not None:
+        _plots(plot, frfs, fits, fmin_hz, fmax_hz, max_order)
+    summary = table.summary()
+    if as_json:
+        print_json({"out": str(out), "poses": summary["poses"], "modes": summary["modes"], "coupled": bool(table.cross)})
+    else:
+        console.print(f"wrote {out}: {summary['rows']} modes at {summary['poses']} poses ({', '.join(f'{d}: {n}' for d, n in summary['modes'].items())})")
+
+
+def _plots(folder: Path, frfs, fits, fmin_hz, fmax_hz, max_order):
+    import matplotlib  # heavy (about 0.3 s): only when a figure is drawn
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # heavy (about 0.3 s): only when a figure is drawn
+
+
+    folder.mkdir(parents=True, exist_ok=True)
+    for frf, found in zip(frfs, fits):
+        f = frf.frequency_hz
+        fig, axes = plt.subplots(2, 1, figsize=(9, 7), sharex=True)
+        for name, h in sorted(frf.frf.items()):
+            axes[0].semilogy(f, np.abs(h), lw=0.8, label=f"{name} measured")
+        if "matrix" in found:
+            for name, h in found["matrix"][1].items():
+                axes[0].semilogy(f, np.abs(h), "--", lw=1, label=f"{name} fitted")
+        else:
+            for name, params in found.items():
+                modes = [IdentifiedMode(p["fn_hz"], p["zeta"], 0, 0) for p in params]
+                _, _, rebuilt = lsfd(f, frf.frf[name], modes)
+                axes[0].semilogy(f, np.abs(rebuilt[:, 0]), "--", lw=1, label=f"{name} fitted")
+        axes[0].set_ylabel("|H| (m/N)")
+        axes[0].legend(fontsize=7)
+        name = next(iter(sorted(frf.frf)))
+        step = max(1, len(f) // 2000)
+        for order in range(2, max_order + 1, 2):
+            lam = lscf_poles(f[::step], frf.frf[name][::step], order)
+            axes[1].plot(np.abs(lam) / (2 * math.pi), np.full(len(lam), order), "k.", ms=2)
+        axes[1].set_ylabel("model order")
+        axes[1].set_xlabel("frequency (Hz)")
+        axes[1].set_xscale("log")
+        fig.suptitle(f"pose {frf.pose_id}: FRFs and stabilization diagram ({name})")
+        fig.tight_layout()
+        fig.savefig(folder / f"{frf.pose_id}.png", dpi=110)
+        plt.close(fig)

@@ -1,0 +1,90 @@
+"""`posedyn gap` and `posedyn gap-campaign`: the simulation-versus-measurement gap workflow."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.markup import escape
+
+from posedyn.errors import InputError
+from posedyn.gap import LIBRARY, analyse
+from posedyn.io.atomic import write_text_atomic
+from posedyn.io.measurements import format_measurements, read_measurements
+from posedyn.io.shipped import SHIPPED_TWIN
+from service.cli.common import console
+from service.gap.baseline import Baseline, generate_measurements
+from service.gap.report import render
+
+
+def gap(
+    measured: Path = typer.Option(..., "--measured", help="Measurement campaign (CSV; README 'Measurement campaigns')."),
+    model: Optional[Path] = typer.Option(None, "--model", help="Model directory: its predictions are the baseline."),
+    twin: bool = typer.Option(False, "--twin", help="The robot twin is the baseline (--twin-file to choose one)."),
+    twin_file: Path = typer.Option(SHIPPED_TWIN, "--twin-file"),
+    cut: Optional[Path] = typer.Option(None, "--cut", help="Cut for critical_depth_mm rows (default: seed 004's)."),
+    absorber: Optional[Path] = typer.Option(None, "--absorber", help="Absorber for absorber_* rows (default: seed 004's)."),
+    out: Path = typer.Option(..., "--out", help="Output directory: report.html, gap.json."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Find where the model and the measurements disagree, name the missing effect, add it, show the gap shrink."""
+    if (model is None) == (not twin):
+        raise InputError("either --model MODEL_DIR or --twin", column="--model")
+    m = read_measurements(measured)
+    baseline = Baseline(twin_file=None if model else twin_file, model_dir=model, cut_file=cut, absorber_file=absorber)
+    y, m = baseline.predict(m)
+    result = analyse(m, y)
+    doc = result.to_json()
+    out.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(out / "gap.json", json.dumps(doc, indent=2) + "\n")
+    write_text_atomic(out / "report.html", render(m, y, result, f"Simulation vs measurement: {measured.name}"))
+    if as_json:
+        print(json.dumps(doc, indent=2))
+        return
+    console.print(f"RMS normalised residual {result.rmse_before:.3g} -> {result.rmse_after:.3g} (noise 1); chi-square p {result.noise_p_before:.2g} -> {result.noise_p_after:.2g}")
+    for e in doc["effects"]:
+        pars = ", ".join(f"{k} = {v:.4g} +- {e['parameter_std'][k]:.2g}" for k, v in e["parameters"].items())
+        console.print(escape(f"named: {e['name']} ({pars}): {e['description']} [{e['source']}]"))
+    for a in doc["ambiguous"]:
+        console.print(f"undecided between {' and '.join(a['candidates'])}: {a['separating_measurement']}")
+    if not result.explained:
+        console.print("no named effect explains the rest; the residual depends on: " + (", ".join(f"{c['variable']} ({c['quantity']})" for c in doc["residual_correlates"]) or "nothing measured"))
+    console.print(f"report: {out / 'report.html'}")
+
+
+def gap_campaign(
+    out: Optional[Path] = typer.Option(None, "--out", help="Measurement campaign to write (CSV)."),
+    hide: list[str] = typer.Option([], "--hide", help="An effect to hide, NAME:parameter=value (repeatable); see `posedyn gap-campaign --list`."),
+    seed: int = typer.Option(0, "--seed"),
+    poses: int = typer.Option(10, "--poses", min=2),
+    twin_file: Path = typer.Option(SHIPPED_TWIN, "--twin-file"),
+    list_effects: bool = typer.Option(False, "--list", help="List the library's effects and exit."),
+):
+    """A synthetic measurement campaign from the twin with named effects hidden in it (for trying and testing `posedyn gap`)."""
+    if list_effects:
+        for e in LIBRARY.values():
+            console.print(escape(f"{e.name}: {', '.join(p.name for p in e.parameters)}; acts on {', '.join(e.quantities)} through {', '.join(e.depends_on)}: {e.description} [{e.source}]"))
+        return
+    if out is None:
+        raise InputError("--out FILE.csv", column="--out")
+    hidden = {}
+    for text in hide:
+        name, _, rest = text.partition(":")
+        if name not in LIBRARY:
+            raise InputError("an effect among " + ", ".join(LIBRARY), got=name, column="--hide")
+        params = {}
+        for item in filter(None, rest.split(",")):
+            key, sep, value = item.partition("=")
+            try:
+                params[key.strip()] = float(value)
+            except ValueError:
+                raise InputError("NAME:parameter=number", got=text, column="--hide") from None
+        expected = [p.name for p in LIBRARY[name].parameters]
+        if sorted(params) != sorted(expected):
+            raise InputError(f"the parameters {expected} for {name}", got=sorted(params), column="--hide")
+        hidden[name] = params
+    m = generate_measurements(Baseline(twin_file=twin_file), hidden, seed=seed, poses=poses)
+    write_text_atomic(out, format_measurements(m, [c for c in m.conditions if not c.startswith("model_")]))
+    console.print(f"wrote {len(m)} measurements to {out}" + (f" with {', '.join(hidden)} hidden" if hidden else ""))

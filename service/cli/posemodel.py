@@ -1,0 +1,131 @@
+"""`posedyn train` and `posedyn predict`: the pose -> modal-parameter model."""
+
+from __future__ import annotations
+
+from enum import Enum
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.table import Table
+
+from posedyn.errors import InputError
+from posedyn.io import concat_tables, read_modal_table, read_pose_table, write_modal_table
+from posedyn.io.model_dir import load_model, save_model
+from posedyn.io.twin_file import load_twin
+from posedyn.posemodel import PoseModel, cross_validate
+from posedyn.posemodel import r2_score, table_targets
+from service.cli.common import console, print_json
+
+
+class Method(str, Enum):
+    stgp = "stgp"
+    mtgp = "mtgp"
+    physics = "physics"
+
+
+def train(
+    files: list[Path] = typer.Argument(..., help="Modal-test tables (CSV)."),
+    out: Path = typer.Option(..., "--out", help="Model directory to write."),
+    method: Method = typer.Option(Method.stgp, "--method", help="stgp, mtgp (coregionalized groups) or physics (twin prior + GP residual)."),
+    features: Optional[str] = typer.Option(None, "--features", help="Comma-separated pose columns (default: the ones that vary)."),
+    cv: int = typer.Option(5, "--cv", help="k-fold cross-validation over poses (0: none)."),
+    holdout: Optional[Path] = typer.Option(None, "--holdout", help="External hold-out table to score."),
+    seed: int = typer.Option(0, "--seed", help="Random seed (restarts, folds)."),
+    restarts: int = typer.Option(1, "--restarts", help="Seeded restarts of the hyperparameter optimisation."),
+    twin: Optional[Path] = typer.Option(None, "--twin", help="Twin file for --method physics (default: the shipped KR R2700 twin)."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
+):
+    """Train a pose -> modal-parameter model and cross-validate it."""
+    table = concat_tables([read_modal_table(f) for f in files])
+    names = [c.strip() for c in features.split(",")] if features else None
+    robot_twin = load_twin(twin) if method is Method.physics else None
+
+    def make():
+        return PoseModel(method.value, names, n_restarts=restarts, random_state=seed, twin=robot_twin)
+
+    model = make().fit(table)
+    save_model(model, out)
+    report = {"method": method.value, "n_poses": len(table.poses), "cv": {}}
+    if cv:
+        report["cv"] = cross_validate(make, table, folds=cv, seed=seed)
+    if holdout is not None:
+        test = read_modal_table(holdout)
+        names_h, Y = table_targets(test)
+        predicted = model.predict(test.poses)
+        report["holdout"] = {
+            t: {"r2": r2_score(predicted[:, model.targets_.index(t)], Y[:, j]), "rmse": float(((predicted[:, model.targets_.index(t)] - Y[:, j]) ** 2).mean() ** 0.5)}
+            for j, t in enumerate(names_h)
+            if t in model.targets_
+        }
+    if model.physics_ is not None:
+        report["physics"] = {k: v for k, v in model.physics_.items() if k in ("used", "reason", "stiffness_scales")}
+    if as_json:
+        print_json(report)
+        return
+    console.print(f"trained {method.value} on {len(table.poses)} poses ({len(model.targets_)} targets, features {', '.join(model.features_)}); wrote {out}")
+    if model.physics_ is not None:
+        console.print(f"physics prior: {model.physics_}")
+    if report["cv"]:
+        t = Table(title=f"{cv}-fold cross-validation over poses", title_justify="left")
+        for c in ("target", "R2 mean", "R2 std", "RMSE"):
+            t.add_column(c, justify="right")
+        for name, v in report["cv"].items():
+            t.add_row(name, f"{v['r2_mean']:.4f}", f"{v['r2_std']:.4f}", f"{v['rmse']:.4g}")
+        console.print(t)
+
+
+def predict(
+    model_dir: Path = typer.Argument(..., help="Model directory from posedyn train."),
+    poses: Path = typer.Option(..., "--poses", help="CSV with the pose columns of the modal-table format."),
+    out: Optional[Path] = typer.Option(None, "--out", help="Write the predictions as a modal table (with std_* columns)."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
+):
+    """Predict tool-tip modes (with std) at poses."""
+    model = load_model(model_dir)
+    pose_set = read_pose_table(poses)
+    try:
+        table = model.predict_table(pose_set)
+    except InputError as exc:
+        raise exc.located(file=str(poses)) from None
+    if out is not None:
+        write_modal_table(table, out)
+    if as_json:
+        result = []
+        for p, pose_id in enumerate(pose_set.pose_id):
+            rows = [i for i in range(len(table)) if table.pose_index[i] == p]
+            result.append(
+                {
+                    "pose_id": pose_id,
+                    "modes": [
+                        {
+                            "direction": str(table.direction[i]),
+                            "mode": int(table.mode[i]),
+                            "fn_hz": float(table.fn_hz[i]),
+                            "std_fn_hz": float(table.std["std_fn_hz"][i]),
+                            "zeta": float(table.zeta[i]),
+                            "std_zeta": float(table.std["std_zeta"][i]),
+                            "k_n_per_m": float(table.k_n_per_m[i]),
+                            "std_k_n_per_m": float(table.std["std_k_n_per_m"][i]),
+                        }
+                        for i in rows
+                    ],
+                }
+            )
+        print_json(result)
+        return
+    t = Table(title=f"predicted modes ({model.method})", title_justify="left")
+    for c in ("pose_id", "mode", "fn_hz", "zeta", "k_n_per_m"):
+        t.add_column(c, justify="right")
+    for i in range(len(table)):
+        s = table.std
+        t.add_row(
+            pose_set.pose_id[table.pose_index[i]],
+            f"{table.direction[i]}{table.mode[i]}",
+            f"{table.fn_hz[i]:.4g} +- {s['std_fn_hz'][i]:.2g}",
+            f"{table.zeta[i]:.3g} +- {s['std_zeta'][i]:.2g}",
+            f"{table.k_n_per_m[i]:.4g} +- {s['std_k_n_per_m'][i]:.2g}",
+        )
+    console.print(t)
+    if out is not None:
+        console.print(f"wrote {out}")

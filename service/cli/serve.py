@@ -1,0 +1,126 @@
+"""`posedyn serve` and `posedyn query`: the Zenoh schedule service and its command-line client."""
+
+from __future__ import annotations
+
+import json
+import logging
+import signal
+import sys
+import threading
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from posedyn.errors import InputError
+from posedyn.io import read_pose_table
+from service.cli.common import console
+from service.zenoh_service.client import ScheduleClient, ServiceError
+from service.zenoh_service.engine import ScheduleEngine
+from service.zenoh_service.protocol import RequestError
+from service.zenoh_service.server import ScheduleService, ServiceSettings
+from service.zenoh_service.session import zenoh_config
+
+
+def serve(
+    model: Path = typer.Option(..., "--model", help="Model directory (posedyn train)."),
+    cell: str = typer.Option(..., "--cell", help="Cell name: keys live under cells/CELL/posedyn/."),
+    cut: Path = typer.Option(..., "--cut", help="Default cut (TOML); a request's cut fields override it."),
+    listen: list[str] = typer.Option([], "--listen", help="Zenoh endpoint to listen on (repeatable), e.g. tcp/0.0.0.0:7447."),
+    connect: list[str] = typer.Option([], "--connect", help="Zenoh endpoint to connect to (repeatable)."),
+    mode: str = typer.Option("peer", "--mode", help="peer (embedded, default), client or router."),
+    config: Optional[Path] = typer.Option(None, "--config", help="Zenoh config (JSON5): TLS, authentication, access control."),
+    state_dir: Optional[Path] = typer.Option(None, "--state-dir", help="Where published plans are kept (republished after a restart)."),
+    absorber: Optional[Path] = typer.Option(None, "--absorber", help="Absorber file (default: seed 004's design)."),
+    actuator: Optional[Path] = typer.Option(None, "--actuator", help="Actuator file (default: seed 000's)."),
+    twin: Optional[Path] = typer.Option(None, "--twin", help="Twin file for the reachability check when the model has none."),
+    max_payload_bytes: int = typer.Option(65536, "--max-payload-bytes", min=64),
+    queue_size: int = typer.Option(32, "--queue-size", min=1, help="Requests waiting for a computation before 'busy'."),
+    workers: int = typer.Option(1, "--workers", min=1, help="Computation threads."),
+    stale_after_s: float = typer.Option(3600.0, "--stale-after-s", help="How long a schedule is valid for the cell."),
+):
+    """Serve per-pose schedules over Zenoh until SIGTERM or SIGINT."""
+    if mode not in ("peer", "client", "router"):
+        raise InputError("--mode peer, client or router", got=mode, column="--mode")
+    for path in filter(None, (model, cut, config, absorber, actuator, twin)):
+        if not path.exists():
+            raise InputError("an existing file or directory", got="missing", file=str(path))
+    logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    try:
+        settings = ServiceSettings(cell, max_payload_bytes, queue_size, workers, stale_after_s)
+    except RequestError as exc:
+        raise InputError("a cell name of letters, digits, - or _", got=cell, column="--cell") from exc
+    engine = ScheduleEngine(model, cut, absorber, actuator, twin)
+    try:
+        conf = zenoh_config(config, mode, listen, connect)
+    except Exception as exc:  # zenoh reports a bad config file or key as ZError / ValueError
+        raise InputError("a valid Zenoh configuration", got=str(exc), file=str(config) if config else None) from None
+    stop = threading.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.set())
+    service = ScheduleService(engine, settings, conf, state_dir)
+    try:
+        service.start()
+    except Exception as exc:  # noqa: BLE001 - e.g. a port in use or a TLS file missing
+        raise InputError("a Zenoh session that opens", got=str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__, file=str(config) if config else None) from None
+    try:
+        print(f"serving cells/{cell}/posedyn (model {engine.model_version[:12]}) mode {mode} listen {list(listen)} connect {list(connect)}", flush=True)
+        while not stop.wait(0.5):
+            pass
+    finally:
+        service.close()
+        print("stopped", flush=True)
+
+
+def query(
+    cell: str = typer.Option(..., "--cell"),
+    connect: list[str] = typer.Option([], "--connect", help="Endpoint of the service or of a router (repeatable)."),
+    pose_json: Optional[str] = typer.Option(None, "--pose-json", help='One pose, e.g. \'{"x_mm": 1400, "y_mm": 0, "z_mm": 800, "beta_deg": 0}\'.'),
+    plan: Optional[Path] = typer.Option(None, "--plan", help="A tool path: CSV with the pose columns."),
+    plan_id: Optional[str] = typer.Option(None, "--plan-id", help="Plan id (default: the CSV's file name)."),
+    cut_json: Optional[str] = typer.Option(None, "--cut-json", help="Cut fields overriding the service's default cut."),
+    config: Optional[Path] = typer.Option(None, "--config", help="Zenoh config (JSON5), e.g. TLS certificates."),
+    timeout_s: float = typer.Option(5.0, "--timeout-s"),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Ask the schedule service for a pose's schedule, or send it a tool path as a plan."""
+    if (pose_json is None) == (plan is None):
+        raise InputError("either --pose-json or --plan", column="--pose-json")
+    cut = _json_option(cut_json, "--cut-json") if cut_json else None
+    try:
+        client = ScheduleClient(cell, connect=connect, config=config, timeout_s=timeout_s).open()
+    except Exception as exc:  # noqa: BLE001 - zenoh could not open (no route, TLS refused)
+        raise InputError("a Zenoh session that connects", got=str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__, column="--connect") from None
+    try:
+        if pose_json is not None:
+            result = client.schedule(_json_option(pose_json, "--pose-json"), cut)
+        else:
+            rows = read_pose_table(plan).records()
+            result = client.plan(plan_id or plan.stem, rows, cut, timeout_s=max(timeout_s, 2.0 * len(rows)))
+    except ServiceError as exc:
+        print(f"error: {exc.code}: {exc.message}", file=sys.stderr)
+        raise typer.Exit(3)
+    finally:
+        client.close()
+    if as_json:
+        print(json.dumps(result, indent=2))
+        return
+    entries = result.get("entries", [result])
+    for e in entries:
+        a = e["absorber"]
+        console.print(
+            f"{e['pose_id']}: critical depth {_g(e['critical_depth_mm'])} mm, chatter {_g(e['dominant_chatter_hz'])} Hz -> "
+            f"absorber {_g(a['field_mt'])} mT, {_g(a['current_a'])} A{'' if a['feasible'] else ' (outside its range)'}, "
+            f"critical depth with it {_g(e['critical_depth_with_absorber_mm'])} mm; DVF gain {_g(e['controller']['dvf_gain_ns_per_m'])} N s/m"
+        )
+
+
+def _g(value) -> str:
+    return "-" if value is None else f"{value:.4g}"
+
+
+def _json_option(text: str, option: str):
+    try:
+        return json.loads(text)
+    except ValueError as exc:
+        raise InputError("JSON", got=str(exc), column=option) from None

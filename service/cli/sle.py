@@ -1,0 +1,102 @@
+"""`posedyn sle` and `posedyn sle compensate`: surface location error (seed 001)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import typer
+
+from posedyn.dynamics import ToolTipDynamics, combine
+from posedyn.errors import InputError
+from posedyn.io import read_modal_table
+from posedyn.sle import SleCut
+from posedyn.sle import compensate, sle_m
+from service.cli.common import Milling, console, print_json
+
+
+
+def _inputs(modes, extra, pose_id, teeth, kt_mpa, kn_mpa, tool_diameter_mm, helix_deg, radial_depth_mm, axial_depth_mm, feed_per_tooth_mm, milling, direction):
+    parts = []
+    for path in [modes] + list(extra or []):
+        table = read_modal_table(path)
+        try:
+            dyn = ToolTipDynamics.from_table(table, pose_id if path == modes else None)
+        except InputError as exc:
+            raise exc.located(file=str(path)) from None
+        parts.append(dyn)
+    dyn = combine(*parts)
+    if direction == "x":  # the surface normal is x: turn the axes so that it becomes y
+        dyn = dyn.rotated(-math.pi / 2)
+    cut = SleCut(
+        teeth=teeth, kt_pa=kt_mpa * 1e6, kn_pa=kn_mpa * 1e6, tool_diameter_m=tool_diameter_mm * 1e-3, helix_rad=math.radians(helix_deg),
+        radial_depth_m=radial_depth_mm * 1e-3, axial_depth_m=axial_depth_mm * 1e-3, feed_per_tooth_m=feed_per_tooth_mm * 1e-3, milling=milling.value,
+    )
+    return dyn, cut
+
+
+def sle(
+    action: Optional[str] = typer.Argument(None, help="compensate: iterate the radial depth (seed 001 section 2.3)."),
+    modes: Optional[Path] = typer.Option(None, "--modes", help="Tool-tip modal table (CSV)."),
+    extra: Optional[list[Path]] = typer.Option(None, "--add-modes", help="Further FRFs to add, e.g. the workpiece/fixture table (repeatable)."),
+    pose_id: Optional[str] = typer.Option(None, "--pose-id"),
+    direction: str = typer.Option("y", "--direction", help="Surface-normal direction of the modal table: x or y."),
+    rpm: Optional[float] = typer.Option(None, "--rpm"),
+    rpm_min: Optional[float] = typer.Option(None, "--rpm-min"),
+    rpm_max: Optional[float] = typer.Option(None, "--rpm-max"),
+    rpm_steps: int = typer.Option(200, "--rpm-steps"),
+    teeth: Optional[int] = typer.Option(None, "--teeth"),
+    kt_mpa: Optional[float] = typer.Option(None, "--kt-mpa"),
+    kn_mpa: Optional[float] = typer.Option(None, "--kn-mpa"),
+    tool_diameter_mm: Optional[float] = typer.Option(None, "--tool-diameter-mm"),
+    helix_deg: float = typer.Option(0.0, "--helix-deg"),
+    radial_depth_mm: Optional[float] = typer.Option(None, "--radial-depth-mm"),
+    axial_depth_mm: Optional[float] = typer.Option(None, "--axial-depth-mm"),
+    feed_per_tooth_mm: Optional[float] = typer.Option(None, "--feed-per-tooth-mm"),
+    milling: Milling = typer.Option(Milling.down, "--milling"),
+    slices: int = typer.Option(20, "--axial-slices"),
+    offset_um: float = typer.Option(0.0, "--offset-um", help="Robot path offset added to the SLE (seed 001 Table 2)."),
+    tolerance_um: float = typer.Option(2.0, "--tolerance-um", help="compensate: stop when the part error is below this."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """SLE at one speed (--rpm) or over a range (--rpm-min --rpm-max --rpm-steps); `posedyn sle compensate ...` iterates the radial depth."""
+    args = dict(modes=modes, teeth=teeth, kt_mpa=kt_mpa, kn_mpa=kn_mpa, tool_diameter_mm=tool_diameter_mm, radial_depth_mm=radial_depth_mm, axial_depth_mm=axial_depth_mm, feed_per_tooth_mm=feed_per_tooth_mm)
+    missing = [k for k, v in args.items() if v is None]
+    if missing:
+        raise InputError("the option --" + missing[0].replace("_", "-"), got="missing", column="--" + missing[0].replace("_", "-"))
+    if direction not in ("x", "y"):
+        raise InputError("x or y", got=direction, column="--direction")
+    dyn, cut = _inputs(modes, extra, pose_id, teeth, kt_mpa, kn_mpa, tool_diameter_mm, helix_deg, radial_depth_mm, axial_depth_mm, feed_per_tooth_mm, milling, direction)
+
+    offset = offset_um * 1e-6
+    if action not in (None, "compensate"):
+        raise InputError("no action or 'compensate'", got=action, column="ACTION")
+    if action == "compensate":
+        if rpm is None:
+            raise InputError("--rpm for compensate", got="missing", column="--rpm")
+        history = compensate(dyn, cut, rpm, tolerance_um * 1e-6, slices=slices, offset_m=offset)
+        out = {"iterations": [{"radial_depth_mm": a * 1e3, "sle_um": e * 1e6, "part_error_um": p * 1e6} for a, e, p in history]}
+        if as_json:
+            print_json(out)
+        else:
+            for i, it in enumerate(out["iterations"], 1):
+                console.print(f"{i}: radial depth {it['radial_depth_mm']:.4f} mm, SLE {it['sle_um']:.2f} um, part error {it['part_error_um']:.2f} um")
+        return
+    if rpm is not None:
+        value = float(sle_m(dyn, cut, rpm, slices, offset_m=offset)[0])
+        if as_json:
+            print_json({"sle_um": value * 1e6})
+        else:
+            console.print(f"SLE {value * 1e6:.3f} um ({'undercut' if value > 0 else 'overcut'}) at {rpm:g} rpm")
+        return
+    if rpm_min is None or rpm_max is None or not 0 < rpm_min < rpm_max or rpm_steps < 2:
+        raise InputError("--rpm, or 0 < --rpm-min < --rpm-max with --rpm-steps >= 2", column="--rpm")
+    speeds = np.linspace(rpm_min, rpm_max, rpm_steps)
+    values = sle_m(dyn, cut, speeds, slices, offset_m=offset)
+    out = {"rpm": speeds.tolist(), "sle_um": (values * 1e6).tolist()}
+    if as_json:
+        print_json(out)
+    else:
+        console.print(f"SLE from {values.min() * 1e6:.2f} to {values.max() * 1e6:.2f} um over {rpm_min:g}-{rpm_max:g} rpm")

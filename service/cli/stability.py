@@ -1,0 +1,191 @@
+"""`posedyn chatter` and `posedyn lobes`: stability of a pose's tool-tip modes in a cut."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from enum import Enum
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import typer
+from rich.table import Table
+
+from posedyn.dynamics import ToolTipDynamics
+from posedyn.errors import InputError
+from posedyn.io import read_modal_table
+from posedyn.io.atomic import write_text_atomic
+from posedyn.stability import Cut, Discretization, StabilityModel
+from posedyn.stability import zoa
+from service.cli.common import Milling, console, finite_or_none, print_json
+
+
+class Method(str, Enum):
+    sdm = "sdm"
+    zoa = "zoa"
+
+
+MODES = typer.Option(..., "--modes", help="Modal table (CSV), e.g. the output of posedyn predict --out.")
+POSE = typer.Option(None, "--pose-id", help="Pose to use (required when the table has several).")
+TEETH = typer.Option(..., "--teeth", help="Number of teeth.")
+KT = typer.Option(..., "--kt-mpa", help="Tangential cutting-force coefficient Kt (MPa = N/mm^2).")
+KN = typer.Option(..., "--kn-mpa", help="Normal cutting-force coefficient Kn (MPa).")
+IMMERSION = typer.Option(..., "--radial-immersion", help="Radial immersion a_e / D in (0, 1].")
+MILLING = typer.Option(Milling.down, "--milling", help="down or up milling.")
+FEED_ANGLE = typer.Option(0.0, "--feed-angle-deg", help="Feed direction measured from the table's x axis towards y.")
+STEPS = typer.Option(40, "--steps", help="Semi-discretization steps per delay.")
+ORDER = typer.Option(0, "--order", help="0: zeroth order (seed 004, weights 1/2); 1: first order.")
+JSON = typer.Option(False, "--json", help="Print JSON.")
+
+
+def _setup(modes: Path, pose_id, teeth, kt_mpa, kn_mpa, radial_immersion, milling, feed_angle_deg, steps, order):
+    table = read_modal_table(modes)
+    try:
+        dyn = ToolTipDynamics.from_table(table, pose_id)
+        cut = Cut(
+            teeth=teeth,
+            kt_pa=kt_mpa * 1e6,
+            kn_pa=kn_mpa * 1e6,
+            radial_immersion=radial_immersion,
+            milling=milling.value,
+            feed_angle_deg=feed_angle_deg,
+        )
+        disc = Discretization(steps=steps, order=order)
+    except InputError as exc:
+        raise exc.located(file=str(modes)) from None
+    pose = pose_id if pose_id is not None else table.poses.pose_id[0]
+    return pose, StabilityModel(dyn, cut, disc)
+
+
+def chatter(
+    modes: Path = MODES,
+    pose_id: Optional[str] = POSE,
+    rpm: float = typer.Option(..., "--rpm", help="Spindle speed (rpm)."),
+    teeth: int = TEETH,
+    kt_mpa: float = KT,
+    kn_mpa: float = KN,
+    radial_immersion: float = IMMERSION,
+    milling: Milling = MILLING,
+    depth_mm: Optional[float] = typer.Option(None, "--depth-mm", help="Also judge this axial depth (mm)."),
+    feed_angle_deg: float = FEED_ANGLE,
+    steps: int = STEPS,
+    order: int = ORDER,
+    as_json: bool = JSON,
+):
+    """Critical depth and dominant chatter frequency at one spindle speed (semi-discretization)."""
+    pose, model = _setup(modes, pose_id, teeth, kt_mpa, kn_mpa, radial_immersion, milling, feed_angle_deg, steps, order)
+    if not np.isfinite(rpm) or rpm <= 0:
+        raise InputError("a spindle speed > 0", got=rpm, column="--rpm")
+    result = model.critical_depths([rpm])
+    family = [f for f, _ in result.family[0]]
+    out = {
+        "pose_id": pose,
+        "rpm": rpm,
+        "critical_depth_mm": finite_or_none(result.depth_m[0] * 1e3),
+        "dominant_chatter_hz": finite_or_none(result.dominant_chatter_hz[0]),
+        "chatter_family_hz": family,
+        "method": "sdm",
+        "steps": steps,
+    }
+    if depth_mm is not None:
+        if not np.isfinite(depth_mm) or depth_mm < 0:
+            raise InputError("a depth >= 0", got=depth_mm, column="--depth-mm")
+        rho = float(model.spectral_radius(rpm, depth_mm * 1e-3))
+        out.update(spectral_radius=rho, stable=rho < 1.0)
+    if as_json:
+        print_json(out)
+        return
+    table = Table(title=f"pose {pose} at {rpm:g} rpm (semi-discretization, {steps} steps)", title_justify="left")
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    depth = out["critical_depth_mm"]
+    table.add_row("critical depth", "never chatters" if depth is None else f"{depth:.4g} mm")
+    if out["dominant_chatter_hz"] is not None:
+        table.add_row("dominant chatter frequency", f"{out['dominant_chatter_hz']:.4g} Hz")
+        table.add_row("chatter family", ", ".join(f"{f:.4g} ({a:.0%})" for f, a in result.family[0]) + " Hz")
+    if depth_mm is not None:
+        table.add_row(f"spectral radius at {depth_mm:g} mm", f"{out['spectral_radius']:.6f} ({'stable' if out['stable'] else 'CHATTER'})")
+    console.print(table)
+
+
+def lobes(
+    modes: Path = MODES,
+    pose_id: Optional[str] = POSE,
+    rpm_min: float = typer.Option(..., "--rpm-min", help="Lowest spindle speed (rpm)."),
+    rpm_max: float = typer.Option(..., "--rpm-max", help="Highest spindle speed (rpm)."),
+    rpm_steps: int = typer.Option(200, "--rpm-steps", help="Number of speeds."),
+    teeth: int = TEETH,
+    kt_mpa: float = KT,
+    kn_mpa: float = KN,
+    radial_immersion: float = IMMERSION,
+    milling: Milling = MILLING,
+    method: Method = typer.Option(Method.sdm, "--method", help="sdm (semi-discretization) or zoa (zeroth-order approximation)."),
+    feed_angle_deg: float = FEED_ANGLE,
+    steps: int = STEPS,
+    order: int = ORDER,
+    csv_out: Optional[Path] = typer.Option(None, "--csv", help="Write rpm, critical_depth_mm to this CSV."),
+    plot: Optional[Path] = typer.Option(None, "--plot", help="Write a PNG of the lobes."),
+    as_json: bool = JSON,
+):
+    """Stability lobes: critical depth against spindle speed, and the absolute limit."""
+    pose, model = _setup(modes, pose_id, teeth, kt_mpa, kn_mpa, radial_immersion, milling, feed_angle_deg, steps, order)
+    if not (np.isfinite(rpm_min) and np.isfinite(rpm_max) and 0 < rpm_min < rpm_max):
+        raise InputError("0 < --rpm-min < --rpm-max", got=(rpm_min, rpm_max), column="--rpm-min")
+    if rpm_steps < 2:
+        raise InputError("at least 2 speeds", got=rpm_steps, column="--rpm-steps")
+    rpm = np.linspace(rpm_min, rpm_max, rpm_steps)
+    if method is Method.sdm:
+        depth = model.critical_depths(rpm, frequencies=False).depth_m
+        absolute, _ = model.absolute_limit_m()
+    else:
+        depth = zoa.lobes(model.dyn, model.cut, rpm)
+        absolute = zoa.absolute_limit_m(model.dyn, model.cut)
+    depth_mm = [finite_or_none(d * 1e3) for d in depth]
+    out = {"rpm": rpm.tolist(), "critical_depth_mm": depth_mm, "absolute_limit_mm": finite_or_none(absolute * 1e3), "method": method.value}
+    if csv_out is not None:
+        _write_csv(csv_out, rpm, depth_mm)
+    if plot is not None:
+        _plot(plot, rpm, depth * 1e3, absolute * 1e3, f"pose {pose}, {method.value}")
+    if as_json:
+        print_json(out)
+        return
+    console.print(f"pose {pose}: {method.value} lobes over {rpm_min:g}-{rpm_max:g} rpm")
+    console.print(f"  lowest critical depth {np.min(depth) * 1e3:.4g} mm at {rpm[np.argmin(depth)]:.0f} rpm; absolute limit {absolute * 1e3:.4g} mm")
+    best = int(np.argmax(np.where(np.isfinite(depth), depth, -np.inf)))
+    console.print(f"  highest critical depth {depth[best] * 1e3:.4g} mm at {rpm[best]:.0f} rpm")
+    for path in (csv_out, plot):
+        if path is not None:
+            console.print(f"  wrote {path}")
+
+
+def _write_csv(path: Path, rpm, depth_mm) -> None:
+    lines = ["rpm,critical_depth_mm"] + [f"{float(r)!r},{'' if d is None else repr(d)}" for r, d in zip(rpm, depth_mm)]
+    write_text_atomic(path, "\n".join(lines) + "\n")
+
+
+def _plot(path: Path, rpm, depth_mm, absolute_mm, title: str) -> None:
+    import matplotlib  # heavy (about 0.3 s): only when a figure is drawn
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # heavy (about 0.3 s): only when a figure is drawn
+
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    ax.fill_between(rpm, np.where(np.isfinite(depth_mm), depth_mm, np.nan), np.nanmax(depth_mm[np.isfinite(depth_mm)]) * 1.1, color="tab:red", alpha=0.12, label="chatter")
+    ax.plot(rpm, depth_mm, color="tab:red")
+    if np.isfinite(absolute_mm):
+        ax.axhline(absolute_mm, color="0.3", ls="--", lw=1, label=f"absolute limit {absolute_mm:.3g} mm")
+    ax.set_xlabel("spindle speed (rpm)")
+    ax.set_ylabel("critical axial depth (mm)")
+    ax.set_title(title)
+    ax.set_ylim(bottom=0)
+    ax.legend(loc="upper right")
+    fig.tight_layout()
+    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", prefix=f".{path.name}.", suffix=".png")
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=120)
+        os.replace(tmp, path)
+    finally:
+        plt.close(fig)
+        Path(tmp).unlink(missing_ok=True)

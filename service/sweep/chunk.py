@@ -1,0 +1,183 @@
+"""One chunk of a workspace sweep: every pose of the chunk through the per-pose chain
+(`absorber.chain.schedule_poses`: modes -> critical depth and dominant chatter -> absorber
+target, field, current -> critical depth with the absorber -> DVF gain and actuator force), plus
+the surface location error when the cut asks for it.
+
+A chunk is a pure function of the sweep's inputs and its poses (`compute_chunk`), so chunks can
+run anywhere (a Dask worker) in any order, be written as they finish and be skipped on a
+resumed run (`service.sweep.runner`). The modes come from a trained model (with their std) or
+straight from the robot twin.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from absorber.chain import PoseModes, ScheduleConfig, coupled, critical_depths, schedule_poses, table_pose_modes
+from absorber.files import read_absorber, read_actuator
+from posedyn.errors import InputError
+from posedyn.io.cut import read_cut, read_sle_cut
+from posedyn.io.model_dir import load_model
+from posedyn.io.twin_file import load_twin
+from posedyn.posemodel import PoseModel
+from posedyn.robot import GridPose, Robot, TwinParameters, direction_rows, pose_modes, tool_pose
+from posedyn.sle import SleCut, sle_m
+from posedyn.table import PoseSet
+from service.sweep.spec import RESULT_COLUMNS, SweepSpec
+
+
+@dataclass(frozen=True, eq=False)
+class SweepContext:
+    """Everything a chunk needs, read once per process: the mode source (a model, or the twin's
+    parameters), the robot for the reachability check, the chain's settings, the SLE cut."""
+
+    spec: SweepSpec
+    model: PoseModel | None
+    robot: Robot | None
+    twin_params: TwinParameters | None
+    schedule: ScheduleConfig
+    sle_cut: SleCut | None
+
+
+@lru_cache(maxsize=4)
+def context(spec_json: str, grid_twin: str | None = None) -> SweepContext:
+    spec = SweepSpec(**json.loads(spec_json))
+    cut, rpm, _ = read_cut(spec.cut)
+    control = read_actuator(Path(spec.actuator) if spec.actuator else None)
+    schedule = ScheduleConfig(cut, rpm, read_absorber(spec.absorber), control=control, policy=spec.policy, steps=spec.steps)
+    model = robot = params = None
+    if spec.model:
+        model = load_model(spec.model)
+        if model.twin is not None:
+            robot = model.twin[0]
+        elif grid_twin:
+            robot, _ = load_twin(grid_twin)
+    else:
+        robot, params = load_twin(spec.twin)
+    return SweepContext(spec, model, robot, params, schedule, read_sle_cut(spec.cut))
+
+
+def pose_modes_of(ctx: SweepContext, poses: PoseSet, index: list[int]) -> dict[int, PoseModes]:
+    """{pose index: PoseModes} of the reachable poses among `index`."""
+    return _model_modes(ctx, poses, index) if ctx.model is not None else _twin_modes(ctx, poses, index)
+
+
+def _twin_modes(ctx: SweepContext, poses: PoseSet, index: list[int]) -> dict[int, PoseModes]:
+    data = ctx.robot.model.createData()
+    count = ctx.twin_params.robot_modes_per_direction
+    out = {}
+    for i in index:
+        pose = tool_pose(poses, i)
+        try:
+            _, modes = pose_modes(ctx.robot, GridPose(pose.label, pose), ctx.twin_params, data=data)
+        except InputError:
+            continue
+        rows = tuple((d, m, fn, z, k, 0.0) for d in ("x", "y", "z") for m, (fn, z, k) in enumerate(direction_rows(modes, d, count), 1))
+        out[i] = PoseModes(poses.pose_id[i], modes.dynamics(), rows, pose.rotation)
+    return out
+
+
+def _model_modes(ctx: SweepContext, poses: PoseSet, index: list[int]) -> dict[int, PoseModes]:
+    reachable, joints = [], []
+    data = ctx.robot.model.createData() if ctx.robot is not None else None
+    for i in index:
+        if ctx.robot is None:
+            reachable.append(i)
+            continue
+        try:
+            joints.append(np.degrees(ctx.robot.inverse(tool_pose(poses, i), data)))
+            reachable.append(i)
+        except InputError:
+            continue
+    if not reachable:
+        return {}
+    subset = poses.subset(reachable)
+    if ctx.robot is not None:
+        subset = PoseSet(subset.pose_id, subset.position_mm, subset.orientation, subset.orientation_deg, np.array(joints))
+    return dict(zip(reachable, table_pose_modes(ctx.model.predict_table(subset))))
+
+
+def compute_chunk(spec_json: str, poses: PoseSet, grid_twin: str | None = None) -> list[dict]:
+    """Result rows (dicts, `RESULT_COLUMNS` plus pose and mode columns) for a PoseSet."""
+    ctx = context(spec_json, grid_twin)
+    index = list(range(len(poses)))
+    found = pose_modes_of(ctx, poses, index)
+    rows = poses.records()
+    for i in index:
+        rows[i].update({c: None for c in RESULT_COLUMNS})
+        rows[i]["reachable"] = i in found
+        rows[i]["flags"] = "" if i in found else "unreachable"
+    order = sorted(found)
+    for i, result in zip(order, schedule_poses([found[i] for i in order], ctx.schedule)):
+        rows[i].update(_result_columns(result))
+        if ctx.sle_cut is not None:
+            rows[i]["sle_um"] = float(sle_m(found[i].dyn, ctx.sle_cut, ctx.schedule.rpm)[0]) * 1e6
+    return rows
+
+
+def _result_columns(result) -> dict:
+    pose, a, c = result.pose, result.absorber, result.controller
+    row = {}
+    for d, m, fn, zeta, k, std in pose.rows:
+        row.update({f"fn_{d}{m}_hz": fn, f"std_fn_{d}{m}_hz": std, f"zeta_{d}{m}": zeta, f"k_{d}{m}_n_per_m": k})
+    lowest = pose.lowest_xy
+    flags = []
+    if not a.feasible:
+        flags.append("outside_absorber_range")
+    if c is None or not (c["dvf_gain_ns_per_m"] > 0 and c["virtual_absorber"]["force_ok"]):
+        flags.append("force_limit")
+    row.update(
+        lowest_fn_hz=lowest[2],
+        lowest_fn_std_hz=lowest[5],
+        critical_depth_mm=_mm(result.critical_depth_m),
+        dominant_chatter_hz=result.dominant_chatter_hz,
+        target_hz=a.target_hz,
+        field_mt=a.field_t * 1e3,
+        current_a=a.current_a if math.isfinite(a.current_a) else None,
+        absorber_feasible=a.feasible,
+        critical_depth_with_absorber_mm=_mm(result.critical_depth_with_absorber_m),
+        actuator_direction=c["direction"] if c else None,
+        dvf_gain_ns_per_m=c["dvf_gain_ns_per_m"] if c else None,
+        gain_margin_db=c["gain_margin_db"] if c and math.isfinite(c["gain_margin_db"]) else None,
+        controller_force_n=c["max_force_n"] if c else None,
+        dynamic_stiffness_gain_pct=c["dynamic_stiffness_gain_pct"] if c else None,
+        flags=";".join(flags),
+    )
+    return row
+
+
+def _mm(depth_m: float):
+    return depth_m * 1e3 if math.isfinite(depth_m) else None
+
+
+# --- lobes at representative poses -------------------------------------------------------------
+
+
+def representative_lobes(spec_json: str, poses: PoseSet, rows: list[dict], grid_twin: str | None = None, speeds: int = 80) -> list[dict]:
+    """Stability lobes (the chain's `critical_depths`, `steps` of the sweep) from 0.5 to 1.5 times the
+    cut's speed, without and with the absorber at its scheduled field, at the poses with the
+    smallest, the median and the largest critical depth."""
+    ctx = context(spec_json, grid_twin)
+    ranked = sorted((r["critical_depth_mm"], i) for i, r in enumerate(rows) if r.get("critical_depth_mm") is not None and r.get("field_mt") is not None)
+    if not ranked:
+        return []
+    picks = {"softest": ranked[0][1], "median": ranked[len(ranked) // 2][1], "stiffest": ranked[-1][1]}
+    found = pose_modes_of(ctx, poses, sorted(set(picks.values())))
+    rpm = np.linspace(0.5, 1.5, speeds) * ctx.schedule.rpm
+    out = []
+    for label, i in picks.items():
+        if i not in found or any(e["pose_id"] == poses.pose_id[i] for e in out):
+            continue
+        field_t = rows[i]["field_mt"] * 1e-3
+        curves = []
+        for dyn in (found[i].dyn, coupled(found[i].dyn, ctx.schedule, field_t)):
+            depths = critical_depths([dyn] * speeds, ctx.schedule.cut, rpm, ctx.schedule.steps, frequencies=False)
+            curves.append([d * 1e3 if math.isfinite(d) else None for d, _ in depths])
+        out.append({"label": label, "pose_id": poses.pose_id[i], "rpm": rpm.tolist(), "depth_mm": curves[0], "depth_with_absorber_mm": curves[1], "field_mt": rows[i]["field_mt"], "cut_rpm": ctx.schedule.rpm})
+    return out

@@ -1,0 +1,101 @@
+"""The computation behind the service: a pose (and cut overrides) in, the `posedyn schedule`
+entry out, from a trained model. No network here; the service calls it off the Zenoh threads."""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from absorber.chain import ScheduleConfig, schedule_entries
+from absorber.files import read_absorber, read_actuator
+from posedyn.errors import InputError
+from posedyn.io.cut import read_cut
+from posedyn.io.model_dir import load_model
+from posedyn.io.twin_file import load_twin
+from posedyn.robot import tool_pose
+from posedyn.table import PoseSet
+from service.zenoh_service.protocol import RequestError
+
+
+class ScheduleEngine:
+    """A loaded model, the default cut and the absorber and controller settings.
+
+    Poses are checked before any prediction: inverse kinematics on the model's twin (or on the
+    given twin file) must succeed (`unreachable_pose`), and each of the model's pose features
+    must lie within its training range widened by a quarter of that range, at least 50 mm or
+    15 deg (`outside_workspace`: a Gaussian process far from its data returns its prior)."""
+
+    def __init__(self, model_dir: Path, cut: Path, absorber: Path | None = None, actuator: Path | None = None, twin: Path | None = None):
+        self.model = load_model(model_dir)
+        self.model_version = self.model.training_hash_
+        self.cut, self.rpm, self.steps = read_cut(cut)
+        self.absorber = read_absorber(absorber)
+        self.control = read_actuator(actuator)
+        self.robot = self.model.twin[0] if self.model.twin is not None else None
+        if self.robot is None and twin is not None:
+            self.robot, _ = load_twin(twin)
+        X = self.model.X_train_ * self.model.x_scale_ + self.model.x_mean_
+        lo, hi = X.min(axis=0), X.max(axis=0)
+        floor = np.array([15.0 if f.endswith("_deg") else 50.0 for f in self.model.features_])
+        margin = np.maximum(0.25 * (hi - lo), floor)
+        self.bounds = {f: (float(a - m), float(b + m)) for f, a, b, m in zip(self.model.features_, lo, hi, margin)}
+        self._lock = threading.Lock()  # Pinocchio's scratch data is not shared between threads
+
+    def entry(self, pose: dict, cut: dict) -> dict:
+        """The schedule entry of one pose (RequestError for a pose or cut it cannot serve)."""
+        poses = self.pose_set(pose)
+        try:
+            the_cut = self.cut
+            overrides = {k: cut[k] for k in ("teeth", "radial_immersion", "milling", "feed_angle_deg") if k in cut}
+            if "kt_mpa" in cut:
+                overrides["kt_pa"] = cut["kt_mpa"] * 1e6
+            if "kn_mpa" in cut:
+                overrides["kn_pa"] = cut["kn_mpa"] * 1e6
+            the_cut = replace(the_cut, **overrides)
+            config = ScheduleConfig(the_cut, cut.get("rpm", self.rpm), self.absorber, control=self.control, steps=self.steps)
+        except InputError as exc:
+            raise RequestError("invalid_field", f"cut: {exc}") from None
+        table = self.model.predict_table(poses)
+        return schedule_entries(table, config)[0]
+
+    def pose_set(self, pose: dict):
+        try:
+            poses = PoseSet.from_columns((pose["pose_id"],), {k: [v] for k, v in pose.items() if k != "pose_id"})
+        except InputError as exc:
+            raise RequestError("invalid_field", f"pose: {exc}") from None
+        columns = poses.numeric_columns()
+        for feature, (lo, hi) in self.bounds.items():
+            if feature not in columns:
+                raise RequestError("missing_field", f"pose.{feature}: the model needs it (its features are {list(self.bounds)})")
+            value = float(columns[feature][0])
+            if not lo <= value <= hi:
+                raise RequestError("outside_workspace", f"pose.{feature}: expected within [{lo:g}, {hi:g}] (the training range widened by a quarter), got {value:g}")
+        if self.robot is not None:
+            try:
+                with self._lock:
+                    joints = self.robot.inverse(tool_pose(poses, 0))
+            except InputError as exc:
+                raise RequestError("unreachable_pose", f"pose: no inverse kinematics solution ({exc})") from None
+            poses = replace(poses, joints_deg=np.degrees(np.asarray(joints)).reshape(1, 6))
+        return poses
+
+
+def canonical(pose: dict, cut: dict) -> str:
+    """A cache key for a (pose, cut) request, independent of the pose's id and of field order."""
+    numbers = {k: v for k, v in pose.items() if k != "pose_id"}
+    return repr((sorted((k, float(v)) for k, v in numbers.items()), sorted((k, v if isinstance(v, str) else float(v)) for k, v in cut.items())))
+
+
+def finite_json(value):
+    """Replace non-finite floats (a depth that never chatters) by None, recursively."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: finite_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite_json(v) for v in value]
+    return value
