@@ -108,9 +108,11 @@ def _commands(args):
     assert out.returncode == 0, out.stderr
     names = set()
     for line in out.stdout.splitlines():
-        parts = line.strip("│ ").split()
-        if parts and parts[0].islower() and parts[0].replace("-", "").isalpha() and len(parts) > 1:
-            names.add(parts[0])
+        if not (line.startswith("│ ") and line[2:3].isalpha()):
+            continue  # a command's name stands right after the box edge; wrapped help is indented
+        name = line[2:].split()[0]
+        if name != "--version" and name.replace("-", "").isalpha():
+            names.add(name)
     return names
 
 
