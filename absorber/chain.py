@@ -53,6 +53,7 @@ class ScheduleConfig:
     policy: str = "match"
     steps: int = 40
     directions: tuple[str, ...] = ("x", "y")
+    absolute_limits: bool = True  # the zeroth-order absolute limits (0.4-0.8 s a structure; sweeps skip them)
 
     def __post_init__(self):
         check_choice("policy", self.policy, POLICIES)
@@ -97,7 +98,7 @@ class PoseSchedule:
     dominant_chatter_hz: float
     absorber: AbsorberEntry
     critical_depth_with_absorber_m: float
-    absolute_limit_m: float
+    absolute_limit_m: float  # NaN where the config skips the absolute limits
     absolute_limit_with_absorber_m: float
     controller: dict | None  # None: no robot mode below 500 Hz in the actuator's direction
 
@@ -231,8 +232,8 @@ def schedule_poses(poses: list[PoseModes], config: ScheduleConfig) -> list[PoseS
             dominant_chatter_hz=chatter_hz,
             absorber=absorber,
             critical_depth_with_absorber_m=depth_with,
-            absolute_limit_m=zoa.absolute_limit_m(pose.dyn, config.cut),
-            absolute_limit_with_absorber_m=zoa.absolute_limit_m(structure, config.cut),
+            absolute_limit_m=zoa.absolute_limit_m(pose.dyn, config.cut) if config.absolute_limits else math.nan,
+            absolute_limit_with_absorber_m=zoa.absolute_limit_m(structure, config.cut) if config.absolute_limits else math.nan,
             controller=controller_entry(pose.pose_id, pose.rows, pose.rotation, config.control),
         ))
     return out

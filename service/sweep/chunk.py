@@ -50,7 +50,7 @@ def context(spec_json: str, grid_twin: str | None = None) -> SweepContext:
     spec = SweepSpec(**json.loads(spec_json))
     cut, rpm, _ = read_cut(spec.cut)
     control = read_actuator(Path(spec.actuator) if spec.actuator else None)
-    schedule = ScheduleConfig(cut, rpm, read_absorber(spec.absorber), control=control, policy=spec.policy, steps=spec.steps)
+    schedule = ScheduleConfig(cut, rpm, read_absorber(spec.absorber), control=control, policy=spec.policy, steps=spec.steps, absolute_limits=False)
     model = robot = params = None
     if spec.model:
         model = load_model(spec.model)
