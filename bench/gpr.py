@@ -31,7 +31,6 @@ from posedyn.io.twin_file import load_twin
 from posedyn.table import PoseSet
 
 
-
 def timed(fn):
     start = time.perf_counter()
     out = fn()

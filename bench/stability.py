@@ -31,7 +31,6 @@ from posedyn.stability import Cut, Discretization, StabilityModel, reference
 from posedyn.table import Mode
 
 
-
 def bench_map(immersion: float, baseline_points: int | None) -> None:
     mode = Mode(922.0, 0.011, 0.03993 * (2 * math.pi * 922.0) ** 2)
     dyn = ToolTipDynamics.from_modes(x=[mode])

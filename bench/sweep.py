@@ -20,7 +20,6 @@ from service.sweep import SweepSpec
 from service.sweep.runner import run_sweep
 
 
-
 def grid_file(folder: Path, poses: int) -> Path:
     """A seed 003-style grid (x 1300-1900 mm, y -300-300 mm, z 600 mm, beta -60-60 deg) with
     about `poses` poses: 25 x 25 positions times poses / 625 angles."""

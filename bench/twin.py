@@ -13,7 +13,6 @@ from posedyn.io.twin_file import load_twin
 from posedyn.robot import ToolPose
 
 
-
 def main() -> None:
     robot, params = load_twin()
     data = robot.model.createData()
