@@ -28,7 +28,7 @@ demo: $(STAMP)
 	@echo
 	@echo "Absorber schedule (seed 004's MRF absorber and cut) at seed 004's positions 3, 5 and 7"
 	printf 'pose_id,x_mm,y_mm,z_mm,beta_deg\nP3,1600,0,800,0\nP5,1400,0,800,0\nP7,1200,0,800,0\n' > build/demo/hou2023_poses.csv
-	$(BIN)/posedyn train datasets/seeds/hou2023_positions.csv --cv 0 --out build/demo/hou2023_model
+	$(BIN)/posedyn train datasets/seeds/hou2023_positions.csv --cv 0 --cut datasets/seeds/hou2023_cut.toml --out build/demo/hou2023_model
 	$(BIN)/posedyn schedule build/demo/hou2023_model --poses build/demo/hou2023_poses.csv \
 		--cut datasets/seeds/hou2023_cut.toml --policy match --out build/demo/schedule.json
 	@echo
@@ -43,7 +43,7 @@ demo: $(STAMP)
 	@echo "open build/demo/sweep/report.html in a browser"
 	@echo
 	@echo "Serve schedules over Zenoh (embedded peer on 127.0.0.1:17447), ask for position 5's schedule, stop"
-	$(BIN)/posedyn serve --model build/demo/hou2023_model --cell demo --cut datasets/seeds/hou2023_cut.toml \
+	$(BIN)/posedyn serve --model build/demo/hou2023_model --cell demo \
 		--listen tcp/127.0.0.1:17447 --state-dir build/demo/service > build/demo/service.log 2>&1 & pid=$$!; \
 	for i in $$(seq 1 150); do grep -q serving build/demo/service.log && break; sleep 0.2; done; \
 	$(BIN)/posedyn query --cell demo --connect tcp/127.0.0.1:17447 --timeout-s 60 \

@@ -13,8 +13,9 @@ Policies:
   stability limit of host plus absorber, the absorber's mass and field-dependent damping
   included (seed 002's max-min Re G for the real, coupled structure).
 
-Stability runs batched over the poses (`posedyn.stability.BatchStability`), grouped by mode
-count; depths are bisected to `DEPTH_REL_TOL`, well inside the discretization error.
+Stability is `posedyn.stability.critical_points`, batched over the poses: the converged engine
+by default (every result carries the accuracy it reached), the semi-discretization when the
+config's `steps` overrides it.
 """
 
 from __future__ import annotations
@@ -32,13 +33,10 @@ from absorber.mrf import FieldSetting, MRFAbsorber
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.errors import InputError, check_choice
 from posedyn.robot import pose_rotation
-from posedyn.stability import BatchStability, Cut, Discretization, zoa
+from posedyn.stability import Cut, StabilityResult, critical_points, zoa
 from posedyn.table import ModalTable
 
 POLICIES = ("match", "sims")
-
-#: Relative bisection tolerance of every critical depth of the chain.
-DEPTH_REL_TOL = 2e-3
 
 
 @dataclass(frozen=True)
@@ -51,7 +49,7 @@ class ScheduleConfig:
     coil: Coil = field(default_factory=Coil)
     control: ControlConfig = field(default_factory=ControlConfig)
     policy: str = "match"
-    steps: int = 40
+    steps: int | None = None  # expert override: semi-discretization steps instead of the converged engine
     directions: tuple[str, ...] = ("x", "y")
     absolute_limits: bool = True  # the zeroth-order absolute limits (0.4-0.8 s a structure; sweeps skip them)
 
@@ -59,8 +57,8 @@ class ScheduleConfig:
         check_choice("policy", self.policy, POLICIES)
         if not (math.isfinite(self.rpm) and self.rpm > 0):
             raise InputError("a spindle speed > 0 rpm", got=self.rpm, column="rpm")
-        if not isinstance(self.steps, int) or self.steps < 4:
-            raise InputError("an integer number of steps >= 4", got=self.steps, column="steps")
+        if self.steps is not None and (not isinstance(self.steps, int) or self.steps < 4):
+            raise InputError("an integer number of steps >= 4 (or none: the converged engine)", got=self.steps, column="steps")
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,6 +96,8 @@ class PoseSchedule:
     dominant_chatter_hz: float
     absorber: AbsorberEntry
     critical_depth_with_absorber_m: float
+    stability: StabilityResult  # the bare structure's, with the accuracy it reached
+    stability_with_absorber: StabilityResult
     absolute_limit_m: float  # NaN where the config skips the absolute limits
     absolute_limit_with_absorber_m: float
     controller: dict | None  # None: no robot mode below 500 Hz in the actuator's direction
@@ -119,6 +119,8 @@ class PoseSchedule:
             "critical_depth_with_absorber_mm": _mm(self.critical_depth_with_absorber_m),
             "absolute_limit_mm": _mm(self.absolute_limit_m),
             "absolute_limit_with_absorber_mm": _mm(self.absolute_limit_with_absorber_m),
+            "stability": self.stability.accuracy_json(),
+            "stability_with_absorber": self.stability_with_absorber.accuracy_json(),
             "modes": [{"direction": d, "mode": m, "fn_hz": fn, "zeta": z, "k_n_per_m": k} for d, m, fn, z, k, _ in self.pose.rows],
             "controller": self.controller,
         }
@@ -181,35 +183,14 @@ def absorber_setting(dyn: ToolTipDynamics, config: ScheduleConfig, chatter_hz: f
     return target, setting, current, bool(feasible)
 
 
-def critical_depths(structures: list[ToolTipDynamics], cut: Cut, rpm, steps: int, frequencies: bool = True, guess_m=None) -> list[tuple[float, float]]:
-    """(critical depth m, dominant chatter Hz) of each structure at its speed (`rpm` one value
-    or one per structure), batched per mode count; `guess_m` (one per structure, NaN for none)
-    starts the bracketing ladder there instead of at seven times the single-mode estimate (the
-    limit lies 3-6 times above it on the twin's workspace)."""
-    rpm = np.broadcast_to(np.asarray(rpm, dtype=float), (len(structures),))
-    out: list[tuple[float, float]] = [(math.nan, math.nan)] * len(structures)
-    groups: dict[int, list[int]] = {}
-    for i, dyn in enumerate(structures):
-        groups.setdefault(dyn.n_modes, []).append(i)
-    for members in groups.values():
-        batch = BatchStability([structures[i] for i in members], cut, rpm[members], Discretization(steps))
-        start = 7.0 * batch.scale_m
-        if guess_m is not None:
-            guess = np.asarray(guess_m, dtype=float)[members]
-            start = np.where(np.isfinite(guess), guess, start)
-        result = batch.critical_depths(frequencies=frequencies, rel_tol=DEPTH_REL_TOL, guess_m=start, rungs=2)
-        for j, i in enumerate(members):
-            out[i] = (float(result.depth_m[j]), float(result.dominant_chatter_hz[j]))
-    return out
-
-
 def schedule_poses(poses: list[PoseModes], config: ScheduleConfig) -> list[PoseSchedule]:
     """The chain for every pose (see the module docstring)."""
     if not poses:
         return []
-    bare = critical_depths([p.dyn for p in poses], config.cut, config.rpm, config.steps)
+    bare = critical_points([p.dyn for p in poses], config.cut, config.rpm, config.steps)
     entries, structures = [], []
-    for pose, (depth, chatter_hz) in zip(poses, bare):
+    for pose, result in zip(poses, bare):
+        depth, chatter_hz = result.depth_m, result.chatter_hz
         if not math.isfinite(chatter_hz):
             chatter_hz = float(pose.dyn.fn_hz[np.argmin(pose.dyn.fn_hz)])
         target, setting, current, feasible = absorber_setting(pose.dyn, config, chatter_hz)
@@ -221,17 +202,17 @@ def schedule_poses(poses: list[PoseModes], config: ScheduleConfig) -> list[PoseS
         )
         entries.append((depth, chatter_hz, AbsorberEntry(config.policy, target, setting.field_t, current, feasible, interval)))
         structures.append(coupled(pose.dyn, config, setting.field_t))
-    # With the absorber the limit gains 1-5x: start the ladder at twice the bare depth.
-    guess = [2.0 * depth for depth, _, _ in entries]
-    with_absorber = critical_depths(structures, config.cut, config.rpm, config.steps, frequencies=False, guess_m=guess)
+    with_absorber = critical_points(structures, config.cut, config.rpm, config.steps, frequencies=False)
     out = []
-    for pose, (depth, chatter_hz, absorber), structure, (depth_with, _) in zip(poses, entries, structures, with_absorber):
+    for pose, (depth, chatter_hz, absorber), structure, result, result_with in zip(poses, entries, structures, bare, with_absorber):
         out.append(PoseSchedule(
             pose=pose,
             critical_depth_m=depth,
             dominant_chatter_hz=chatter_hz,
             absorber=absorber,
-            critical_depth_with_absorber_m=depth_with,
+            critical_depth_with_absorber_m=result_with.depth_m,
+            stability=result,
+            stability_with_absorber=result_with,
             absolute_limit_m=zoa.absolute_limit_m(pose.dyn, config.cut) if config.absolute_limits else math.nan,
             absolute_limit_with_absorber_m=zoa.absolute_limit_m(structure, config.cut) if config.absolute_limits else math.nan,
             controller=controller_entry(pose.pose_id, pose.rows, pose.rotation, config.control),

@@ -17,17 +17,25 @@ def test_chatter_json_contract(datasets):
     result = posedyn("chatter", "--modes", datasets / "seeds/hou2023_positions.csv", "--pose-id", "P5", "--rpm", 2000, *CUT, "--depth-mm", 0.5, "--json")
     assert result.returncode == 0, result.stderr
     out = json.loads(result.stdout)
-    assert set(out) == {"pose_id", "rpm", "critical_depth_mm", "dominant_chatter_hz", "chatter_family_hz", "method", "steps", "spectral_radius", "stable"}
-    assert out["pose_id"] == "P5" and out["method"] == "sdm" and out["steps"] == 40
+    assert set(out) == {"pose_id", "rpm", "critical_depth_mm", "dominant_chatter_hz", "chatter_family_hz", "method", "converged", "rel_error_estimate", "stable"}
+    assert out["pose_id"] == "P5" and out["method"] == "floquet" and out["converged"] and out["rel_error_estimate"] < 0.02
     assert out["critical_depth_mm"] == pytest.approx(0.891, abs=0.005)
     assert out["chatter_family_hz"][0] == out["dominant_chatter_hz"]
+    assert out["stable"] is True
+
+
+def test_chatter_steps_is_an_expert_override_that_says_so(datasets):
+    result = posedyn("chatter", "--modes", datasets / "seeds/hou2023_positions.csv", "--pose-id", "P5", "--rpm", 2000, *CUT, "--depth-mm", 0.5, "--steps", 40, "--json")
+    out = json.loads(result.stdout)
+    assert out["method"] == "sdm" and out["steps"] == 40 and out["converged"] is None and out["rel_error_estimate"] is None
+    assert out["critical_depth_mm"] == pytest.approx(0.891, abs=0.005)
     assert out["stable"] is True and out["spectral_radius"] < 1
 
 
 def test_chatter_above_the_critical_depth_is_unstable(datasets):
     result = posedyn("chatter", "--modes", datasets / "seeds/hou2023_positions.csv", "--pose-id", "P5", "--rpm", 2000, *CUT, "--depth-mm", 1.0, "--json")
     out = json.loads(result.stdout)
-    assert out["stable"] is False and out["spectral_radius"] > 1
+    assert out["stable"] is False and out["critical_depth_mm"] < 1.0
 
 
 def test_chatter_needs_a_pose_when_the_table_has_several(datasets):
@@ -42,7 +50,7 @@ def test_chatter_rejects_a_bad_cut(datasets):
     assert result.returncode == 2 and "radial_immersion" in result.stderr and "hou2023_positions.csv" in result.stderr
 
 
-@pytest.mark.parametrize("method", ["sdm", "zoa"])
+@pytest.mark.parametrize("method", ["floquet", "sdm", "zoa"])
 def test_lobes_json_csv_and_plot(datasets, tmp_path, method):
     csv_path, png = tmp_path / "lobes.csv", tmp_path / "lobes.png"
     result = posedyn(
@@ -51,10 +59,10 @@ def test_lobes_json_csv_and_plot(datasets, tmp_path, method):
     )
     assert result.returncode == 0, result.stderr
     out = json.loads(result.stdout)
-    assert set(out) == {"rpm", "critical_depth_mm", "absolute_limit_mm", "method"} and out["method"] == method
+    assert set(out) == {"rpm", "critical_depth_mm", "absolute_limit_mm", "method"} | ({"converged"} if method == "floquet" else set()) and out["method"] == method
     assert len(out["rpm"]) == len(out["critical_depth_mm"]) == 11
     i = out["rpm"].index(2000.0)
-    assert out["critical_depth_mm"][i] == pytest.approx(0.891 if method == "sdm" else 0.875, abs=0.005)
+    assert out["critical_depth_mm"][i] == pytest.approx(0.875 if method == "zoa" else 0.891, abs=0.005)
     assert 0 < out["absolute_limit_mm"] <= min(out["critical_depth_mm"])
     assert csv_path.read_text().splitlines()[0] == "rpm,critical_depth_mm"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

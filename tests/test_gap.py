@@ -33,7 +33,7 @@ TRUE = {
 
 @pytest.fixture(scope="module")
 def baseline():
-    return Baseline(twin_file=ROOT / "datasets/robots/kr_r2700_twin.toml")
+    return Baseline(twin_file=ROOT / "datasets/robots/kr_r2700_twin.toml", cut_file=ROOT / "datasets/seeds/hou2023_cut.toml")
 
 
 _DESIGNS = {}
@@ -142,9 +142,9 @@ def test_two_equally_good_explanations_are_reported_with_the_measurement_that_se
 def test_gap_cli_contract_and_report(tmp_path):
     meas = tmp_path / "meas.csv"
     base = [sys.executable, "-c", "from service.cli import main; main()"]
-    made = subprocess.run(base + ["gap-campaign", "--out", str(meas), "--hide", "mrf_temperature_drift:modulus_drop_per_mk=3", "--seed", "2"], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    made = subprocess.run(base + ["gap-campaign", "--cut", str(ROOT / "datasets/seeds/hou2023_cut.toml"), "--out", str(meas), "--hide", "mrf_temperature_drift:modulus_drop_per_mk=3", "--seed", "2"], capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert made.returncode == 0, made.stderr
-    out = subprocess.run(base + ["gap", "--measured", str(meas), "--twin", "--out", str(tmp_path / "gap"), "--json"], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    out = subprocess.run(base + ["gap", "--measured", str(meas), "--twin", "--cut", str(ROOT / "datasets/seeds/hou2023_cut.toml"), "--out", str(tmp_path / "gap"), "--json"], capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert out.returncode == 0, out.stderr
     doc = json.loads(out.stdout)
     assert set(doc) >= {"effects", "rmse_before", "rmse_after", "noise_std", "explained"}

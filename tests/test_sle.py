@@ -95,3 +95,72 @@ def test_sle_cli_contract(datasets):
     assert set(sweep) == {"rpm", "sle_um"} and len(sweep["sle_um"]) == 5
     steps = run("compensate", "--rpm", 10700, "--tolerance-um", 2)["iterations"]
     assert set(steps[0]) == {"radial_depth_mm", "sle_um", "part_error_um"} and abs(steps[-1]["part_error_um"]) < 2
+
+
+# --- issue 19: conventions checked against a geometric simulation that shares none of them -----------
+# tests/independent_sle_sim.py (written blind to posedyn.sle) cuts the wall as the envelope of every
+# slice's edge path with the tool-tip vibration, so the surface instant, the direction of the helix lag
+# and the surface normal follow from the geometry. Compared like with like: its nominal (fixed-angle)
+# engagement and the deepest point of each feed mark, Richardson-extrapolated in its time step
+# (M = 360, 720 steps/rev; first-order force coupling). Full Table 7 runs (M up to 1440, 0.4-0.8 s)
+# agree with sle_m to <= 0.3 um / 0.8 %; the shortened runs here reproduce those to ~0.03 um.
+
+TABLE7_POINTS = [  # (machine, face, axial depth m, feed/tooth m) at 10,700 rpm
+    ("machine_tool", "x", 2.5e-3, 0.25e-3),
+    ("machine_tool", "y", 2.5e-3, 0.25e-3),
+    ("spindle_robot", "x", 1.5e-3, 0.125e-3),
+    ("spindle_robot", "y", 2.5e-3, 0.25e-3),
+]
+
+
+def _geometric_sle_um(machine, face, depth, feed, rpm=10700.0):
+    import independent_sle_sim as sim
+
+    bottoms = [sim.simulate(machine, face, rpm, depth, feed, M=m, T_sim=0.15, engagement="nominal")["sle_bottoms_um"] for m in (360, 720)]
+    return 2 * bottoms[1] - bottoms[0]
+
+
+def _frequency_domain_sle_um(datasets, machine, face, depth, feed, rpm=10700.0):
+    tables = {name: read_modal_table(datasets / f"seeds/swan_{name}.csv") for name in ("spindle_robot", "fixture", "machine_tool")}
+    if machine == "machine_tool":
+        dyn = ToolTipDynamics.from_table(tables["machine_tool"])
+    else:
+        dyn = combine(ToolTipDynamics.from_table(tables["spindle_robot"]), ToolTipDynamics.from_table(tables["fixture"]))
+    if face == "x":
+        dyn = dyn.rotated(-math.pi / 2)  # x-face normal -> y, as `posedyn sle --direction x`
+    return sle_m(dyn, replace(CUT, axial_depth_m=depth, feed_per_tooth_m=feed), rpm, slices=50)[0] * 1e6
+
+
+@pytest.mark.parametrize("machine,face,depth,feed", TABLE7_POINTS)
+def test_seed001_table7_agrees_with_independent_geometric_simulation(datasets, machine, face, depth, feed):
+    """Issue 19 target: 0.2 um or 2 %. Tighter here (0.05 um + 1 %): the genuine residual is the
+    deepest point of the edge path versus the exact phi = pi sample (<= 0.8 % at Table 7)."""
+    reference = _geometric_sle_um(machine, face, depth, feed)
+    value = _frequency_domain_sle_um(datasets, machine, face, depth, feed)
+    assert abs(value - reference) <= 0.05 + 0.01 * abs(reference), (value, reference)
+
+
+def test_single_instant_sampling_is_rejected_by_the_geometric_simulation(datasets, monkeypatch):
+    """The reading that samples every slice at the bottom slice's exit (no helix lag in the
+    sampling) gives 3.6 um where the geometry gives 1.0 um (machine tool, x face, Table 7 TC4)."""
+    import posedyn.sle as sle
+
+    reference = _geometric_sle_um("machine_tool", "x", 2.5e-3, 0.25e-3)
+    monkeypatch.setattr(sle, "_exit_phases", lambda cut, slices: np.full(slices, math.pi))
+    wrong = _frequency_domain_sle_um(datasets, "machine_tool", "x", 2.5e-3, 0.25e-3)
+    assert abs(wrong - reference) > 1.0
+
+
+def test_up_milling_surface_normal_is_plus_y(robot):
+    """Up milling cuts the wall at entry, phi = 0, where the edge points to +y: a tool displaced
+    by +y cuts deeper (overcut), so SLE (+ = undercut) = -y; down milling (exit, phi = pi, wall at -y)
+    SLE = +y. Checked in the quasi-static limit, y = G(0) F_y at the surface instants."""
+    from posedyn.sle import normal_force
+
+    compliance = float(robot.frf(np.array([0.0]))[0, 1, 1].real)
+    for milling, surface, sign in (("down", math.pi, 1.0), ("up", 0.0, -1.0)):
+        cut = replace(CUT, milling=milling, radial_depth_m=1e-3)
+        chi = 2 * cut.axial_depth_m / 20 * math.tan(cut.helix_rad) / cut.tool_diameter_m
+        y = compliance * np.mean(normal_force(cut, surface + chi * np.arange(20), 20))
+        assert sle_quasi_static_m(robot, cut) == pytest.approx(sign * y, rel=1e-12)
+        assert sle_m(robot, cut, 0.1)[0] == pytest.approx(sign * y, rel=1e-3)

@@ -153,7 +153,7 @@ def twin_sweep(tmp_path_factory):
     grid = folder / "grid.toml"
     grid.write_text(GRID.format(twin=TWIN.as_posix()))
     out = folder / "out"
-    sweep_cli("--twin", TWIN, "--grid", grid, "--cut", CUT, "--out", out, "--workers", "1", "--chunk-size", "4", "--steps", "40", "--json")
+    sweep_cli("--twin", TWIN, "--grid", grid, "--cut", CUT, "--out", out, "--workers", "1", "--chunk-size", "4", "--json")
     return out
 
 
@@ -178,20 +178,20 @@ def test_sweep_writes_results_chunks_and_report(twin_sweep):
 
 
 def test_sweep_refuses_to_mix_runs(twin_sweep, grid):
-    again = sweep_cli("--twin", TWIN, "--grid", grid, "--cut", CUT, "--out", twin_sweep, "--workers", "1", "--chunk-size", "4", "--steps", "40", check=False)
+    again = sweep_cli("--twin", TWIN, "--grid", grid, "--cut", CUT, "--out", twin_sweep, "--workers", "1", "--chunk-size", "4", check=False)
     assert again.returncode == 2 and "--resume" in again.stderr
     changed = sweep_cli("--twin", TWIN, "--grid", grid, "--cut", CUT, "--out", twin_sweep, "--workers", "1", "--chunk-size", "4", "--steps", "30", "--resume", check=False)
     assert changed.returncode == 2 and "fingerprint" in changed.stderr
 
 
 def test_sweep_with_a_trained_model_reports_uncertainty_and_equals_posedyn_schedule(tmp_path, grid):
-    """The sweep and `posedyn schedule` run the one per-pose chain: the same model, poses and
-    steps give the same numbers to the last digit."""
+    """The sweep and `posedyn schedule` run the one per-pose chain: the same model and poses give
+    the same numbers to the last digit; `posedyn chatter` on the predicted modes agrees to 0.5 %."""
     table = read_modal_table(ROOT / "datasets/campaigns/seed003_twin_s1.csv")
     model = PoseModel(method="stgp").fit(table)
     save_model(model, tmp_path / "model")
     out = tmp_path / "out"
-    sweep_cli(tmp_path / "model", "--grid", grid, "--cut", CUT, "--out", out, "--workers", "1", "--no-lobes", "--steps", "40")
+    sweep_cli(tmp_path / "model", "--grid", grid, "--cut", CUT, "--out", out, "--workers", "1", "--no-lobes")
     rows = read_rows(out / "results.csv")
     assert next(r for r in rows if r["pose_id"] == "far_away")["flags"] == "unreachable"  # the grid's twin checks reach
     reachable = [r for r in rows if r["reachable"] == "true"]
@@ -208,6 +208,20 @@ def test_sweep_with_a_trained_model_reports_uncertainty_and_equals_posedyn_sched
         assert float(row["field_mt"]) == pytest.approx(entry["absorber"]["field_mt"], rel=1e-9)
         assert float(row["critical_depth_with_absorber_mm"]) == pytest.approx(entry["critical_depth_with_absorber_mm"], rel=1e-9)
         assert float(row["dvf_gain_ns_per_m"]) == pytest.approx(entry["controller"]["dvf_gain_ns_per_m"], rel=1e-9)
+        assert entry["stability"]["method"] == "floquet" and entry["stability"]["converged"]
+    predicted = subprocess.run([sys.executable, "-m", "posedyn", "predict", tmp_path / "model", "--poses", tmp_path / "poses.csv", "--out", tmp_path / "modes.csv"], capture_output=True, text=True, cwd=ROOT)
+    assert predicted.returncode == 0, predicted.stderr
+    cut, rpm, _ = read_cut(CUT)
+    for row in picked:
+        chatter = subprocess.run(
+            [sys.executable, "-m", "posedyn", "chatter", "--modes", tmp_path / "modes.csv", "--pose-id", row["pose_id"], "--rpm", str(rpm), "--teeth", str(cut.teeth),
+             "--kt-mpa", str(cut.kt_pa / 1e6), "--kn-mpa", str(cut.kn_pa / 1e6), "--radial-immersion", str(cut.radial_immersion), "--milling", cut.milling, "--json"],
+            capture_output=True, text=True, cwd=ROOT,
+        )
+        assert chatter.returncode == 0, chatter.stderr
+        single = json.loads(chatter.stdout)
+        assert single["critical_depth_mm"] == pytest.approx(float(row["critical_depth_mm"]), rel=5e-3)
+        assert single["dominant_chatter_hz"] == pytest.approx(float(row["dominant_chatter_hz"]), rel=5e-3)
 
 
 def test_sweep_bad_input_names_the_file(tmp_path):

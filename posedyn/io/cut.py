@@ -1,5 +1,6 @@
 """Cut parameter files (TOML, `kind = "cut"`): `[cut] rpm, teeth, kt_mpa, kn_mpa,
-radial_immersion, milling, feed_angle_deg, tool_diameter_mm`, optional `[stability] steps` and
+radial_immersion, milling, feed_angle_deg, tool_diameter_mm`, optional `[stability] steps` (an
+expert override: semi-discretization with that many steps instead of the converged engine) and
 optional `[sle] helix_deg, axial_depth_mm, feed_per_tooth_mm` (the surface location error of
 this cut; the radial depth is radial_immersion x tool_diameter_mm)."""
 
@@ -15,8 +16,8 @@ from posedyn.sle import SleCut
 from posedyn.stability import Cut
 
 
-def read_cut(path: str | os.PathLike) -> tuple[Cut, float, int]:
-    """(Cut, rpm, steps) from a cut file."""
+def read_cut(path: str | os.PathLike) -> tuple[Cut, float, int | None]:
+    """(Cut, rpm, steps) from a cut file; steps None unless the file overrides the engine."""
     p = read_params(path)
     with reading(path, "cut file"):
         c = p["cut"]
@@ -29,7 +30,8 @@ def read_cut(path: str | os.PathLike) -> tuple[Cut, float, int]:
             feed_angle_deg=float(c.get("feed_angle_deg", 0.0)),
         )
         rpm = float(c["rpm"])
-        steps = int(p.get("stability", {}).get("steps", 40))
+        steps = p.get("stability", {}).get("steps")
+        steps = None if steps is None else int(steps)
     if not rpm > 0:
         raise InputError("rpm > 0", got=rpm, column="rpm", file=str(Path(path)))
     return cut, rpm, steps

@@ -332,7 +332,10 @@ def r2_score(predicted: np.ndarray, actual: np.ndarray) -> float:
 
 def cross_validate(make_model, table: ModalTable, folds: int = 5, seed: int = 0) -> dict:
     """k-fold cross-validation over poses (seed 003 section 5.2): per target the mean and
-    sample standard deviation of R^2 over the folds and the RMSE over all held-out poses."""
+    sample standard deviation of R^2 over the folds, the R^2 of all held-out predictions pooled
+    and the RMSE over all held-out poses. R^2 is undefined on a fold of fewer than two poses (or
+    whose values do not vary): the mean and std then cover the folds where it is defined, are
+    None where fewer than one (mean) or two (std) folds have it, and `note` says so."""
     n = len(table.poses)
     if not 2 <= folds <= n:
         raise InputError(f"between 2 and {n} folds", got=folds, column="--cv")
@@ -347,13 +350,20 @@ def cross_validate(make_model, table: ModalTable, folds: int = 5, seed: int = 0)
         index = [model.targets_.index(t) for t in names]
         out = model.predict(table.select_poses(test).poses)[:, index]
         predicted[test] = out
-        r2.append([r2_score(out[:, j], Y[test, j]) for j in range(len(names))])
+        r2.append([r2_score(out[:, j], Y[test, j]) if len(test) >= 2 else float("nan") for j in range(len(names))])
     r2 = np.array(r2)
-    return {
-        name: {
-            "r2_mean": float(np.nanmean(r2[:, j])),
-            "r2_std": float(np.nanstd(r2[:, j], ddof=1)),
+    result = {}
+    for j, name in enumerate(names):
+        defined = r2[:, j][np.isfinite(r2[:, j])]
+        pooled = r2_score(predicted[:, j], Y[:, j])
+        entry = {
+            "r2_mean": float(defined.mean()) if len(defined) else None,
+            "r2_std": float(defined.std(ddof=1)) if len(defined) >= 2 else None,
+            "r2_pooled": pooled if np.isfinite(pooled) else None,
             "rmse": float(np.sqrt(np.mean((predicted[:, j] - Y[:, j]) ** 2))),
         }
-        for j, name in enumerate(names)
-    }
+        if len(defined) < folds:
+            entry["note"] = (f"R2 is undefined on {folds - len(defined)} of {folds} folds (fewer than two poses, or values that do not vary): "
+                             f"r2_mean and r2_std cover the other {len(defined)}; r2_pooled is over all held-out poses")
+        result[name] = entry
+    return result

@@ -1,13 +1,19 @@
 """Milling stability: the cut and its force matrices (`cutting`), semi-discretization (`sdm`),
 zeroth-order approximation (`zoa`), critical depths, lobes and chatter frequencies of one
-structure (`model`) and of many at one speed (`batch`), time-domain check (`timesim`) and the
-published reference cases (`reference`)."""
+structure (`model`) and of many at one speed (`batch`), the converged engine on the exact
+Floquet characteristic equation (`floquet`), the one entry point for user-facing numbers
+(`critical`), time-domain check (`timesim`) and the published reference cases (`reference`)."""
 
 from posedyn.stability.batch import BatchStability
+from posedyn.stability.critical import REL_TOL, StabilityResult, critical_lobes, critical_points
 from posedyn.stability.cutting import Cut, force_matrix, interval_force_matrices, mean_force_matrix
 from posedyn.stability.model import CriticalDepths, Discretization, StabilityModel, chatter_frequencies
 
 __all__ = [
+    "REL_TOL",
+    "StabilityResult",
+    "critical_lobes",
+    "critical_points",
     "BatchStability",
     "Cut",
     "CriticalDepths",

@@ -77,7 +77,7 @@ def _h_antiderivative(cut: Cut, phi: np.ndarray) -> np.ndarray:
     )
 
 
-def _engaged_integral(cut: Cut, phi_a: np.ndarray, phi_b: np.ndarray) -> np.ndarray:
+def engaged_integral(cut: Cut, phi_a: np.ndarray, phi_b: np.ndarray) -> np.ndarray:
     """Sum over teeth of the integral of H over tooth angles [phi_a, phi_b] (phi_b - phi_a < 2 pi),
     counting only the engaged part, for the first tooth's angle range (other teeth offset by 2 pi j / N)."""
     st, ex = cut.engagement_rad
@@ -102,7 +102,7 @@ def interval_force_matrices(cut: Cut, steps: int) -> np.ndarray:
     """
     dphi = 2.0 * np.pi / (cut.teeth * steps)
     edges = np.arange(steps + 1) * dphi
-    return _engaged_integral(cut, edges[:-1], edges[1:]) / dphi
+    return engaged_integral(cut, edges[:-1], edges[1:]) / dphi
 
 
 def mean_force_matrix(cut: Cut) -> np.ndarray:

@@ -17,7 +17,7 @@ from posedyn.errors import InputError
 from posedyn.io.atomic import write_text_atomic
 from posedyn.io.cut import read_cut
 from posedyn.stability import Cut, mean_force_matrix
-from service.cli.common import Milling, console, finite_or_none, modal_table_for, print_json
+from service.cli.common import Milling, console, finite_or_none, modal_table_for, print_json, resolve_cut
 
 app = typer.Typer(help="MRF absorber: optimal tuning, field for a target frequency.", no_args_is_help=True)
 
@@ -100,7 +100,7 @@ def schedule(
     model_dir: Optional[Path] = typer.Argument(None, help="Model directory (or give --modes)."),
     modes: Optional[Path] = typer.Option(None, "--modes", help="Modal table instead of a model."),
     poses: Path = typer.Option(..., "--poses", help="Poses to schedule (CSV with the pose columns)."),
-    cut: Path = typer.Option(..., "--cut", help="Cut file (TOML)."),
+    cut: Optional[Path] = typer.Option(None, "--cut", help="Cut file (TOML; default: MODEL_DIR/cut.toml)."),
     absorber: Optional[Path] = typer.Option(None, "--absorber", help="Absorber file (default: seed 004's design)."),
     policy: Policy = typer.Option(Policy.match, "--policy"),
     actuator: Optional[Path] = typer.Option(None, "--actuator", help="Actuator file for the controller field (default: seed 000's)."),
@@ -108,7 +108,7 @@ def schedule(
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Per-pose absorber schedule: chatter, target frequency, field, current, depths."""
-    the_cut, rpm, steps = read_cut(cut)
+    the_cut, rpm, steps = read_cut(resolve_cut(cut, model_dir))
     config = ScheduleConfig(the_cut, rpm, read_absorber(absorber), control=read_actuator(actuator), policy=policy.value, steps=steps)
     entries = schedule_entries(modal_table_for(model_dir, modes, poses), config)
     if out is not None:

@@ -14,6 +14,7 @@ from rich.console import Console
 
 from posedyn.errors import InputError
 from posedyn.io import read_modal_table, read_pose_table
+from posedyn.io.json_values import json_ready
 from posedyn.io.model_dir import load_model
 
 console = Console(width=None if sys.stdout.isatty() else 140)
@@ -25,7 +26,7 @@ def finite_or_none(value: float):
 
 
 def print_json(value) -> None:
-    print(json.dumps(value, indent=2, allow_nan=False))
+    print(json.dumps(json_ready(value), indent=2, allow_nan=False))
 
 
 class Milling(str, Enum):
@@ -45,3 +46,13 @@ def modal_table_for(model_dir: Optional[Path], modes: Optional[Path], poses: Pat
             raise InputError("pose_ids present in the modal table", got=missing[:3], file=str(poses), column="pose_id")
         return table.select_poses([table.poses.index(p) for p in pose_set.pose_id])
     return load_model(model_dir).predict_table(pose_set)
+
+
+def resolve_cut(cut: Optional[Path], model_dir: Optional[Path]) -> Path:
+    """The one rule for the cut of every command: `--cut`, else the model directory's cut.toml
+    (`posedyn train --cut` stores it), else an error naming both."""
+    if cut is not None:
+        return cut
+    if model_dir is not None and (Path(model_dir) / "cut.toml").exists():
+        return Path(model_dir) / "cut.toml"
+    raise InputError("--cut CUT.toml, or a model directory trained with --cut (MODEL_DIR/cut.toml)", got="neither", column="--cut")

@@ -14,7 +14,7 @@ from posedyn.gap import LIBRARY, analyse
 from posedyn.io.atomic import write_text_atomic
 from posedyn.io.measurements import format_measurements, read_measurements
 from posedyn.io.shipped import SHIPPED_TWIN
-from service.cli.common import console
+from service.cli.common import console, resolve_cut
 from service.gap.baseline import Baseline, generate_measurements
 from service.gap.report import render
 
@@ -24,7 +24,7 @@ def gap(
     model: Optional[Path] = typer.Option(None, "--model", help="Model directory: its predictions are the baseline."),
     twin: bool = typer.Option(False, "--twin", help="The robot twin is the baseline (--twin-file to choose one)."),
     twin_file: Path = typer.Option(SHIPPED_TWIN, "--twin-file"),
-    cut: Optional[Path] = typer.Option(None, "--cut", help="Cut for critical_depth_mm rows (default: seed 004's)."),
+    cut: Optional[Path] = typer.Option(None, "--cut", help="Cut for critical_depth_mm rows (default: MODEL_DIR/cut.toml; needed when the campaign has such rows)."),
     absorber: Optional[Path] = typer.Option(None, "--absorber", help="Absorber for absorber_* rows (default: seed 004's)."),
     out: Path = typer.Option(..., "--out", help="Output directory: report.html, gap.json."),
     as_json: bool = typer.Option(False, "--json"),
@@ -33,6 +33,8 @@ def gap(
     if (model is None) == (not twin):
         raise InputError("either --model MODEL_DIR or --twin", column="--model")
     m = read_measurements(measured)
+    if cut is None and model is not None and (model / "cut.toml").exists():
+        cut = resolve_cut(cut, model)
     baseline = Baseline(twin_file=None if model else twin_file, model_dir=model, cut_file=cut, absorber_file=absorber)
     y, m = baseline.predict(m)
     result = analyse(m, y)
@@ -60,6 +62,7 @@ def gap_campaign(
     seed: int = typer.Option(0, "--seed"),
     poses: int = typer.Option(10, "--poses", min=2),
     twin_file: Path = typer.Option(SHIPPED_TWIN, "--twin-file"),
+    cut: Optional[Path] = typer.Option(None, "--cut", help="Cut of the critical_depth_mm rows (posedyn gap needs the same one)."),
     list_effects: bool = typer.Option(False, "--list", help="List the library's effects and exit."),
 ):
     """A synthetic measurement campaign from the twin with named effects hidden in it (for trying and testing `posedyn gap`)."""
@@ -85,6 +88,6 @@ def gap_campaign(
         if sorted(params) != sorted(expected):
             raise InputError(f"the parameters {expected} for {name}", got=sorted(params), column="--hide")
         hidden[name] = params
-    m = generate_measurements(Baseline(twin_file=twin_file), hidden, seed=seed, poses=poses)
+    m = generate_measurements(Baseline(twin_file=twin_file, cut_file=resolve_cut(cut, None)), hidden, seed=seed, poses=poses)
     write_text_atomic(out, format_measurements(m, [c for c in m.conditions if not c.startswith("model_")]))
     console.print(f"wrote {len(m)} measurements to {out}" + (f" with {', '.join(hidden)} hidden" if hidden else ""))

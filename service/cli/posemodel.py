@@ -11,6 +11,8 @@ from rich.table import Table
 
 from posedyn.errors import InputError
 from posedyn.io import concat_tables, read_modal_table, read_pose_table, write_modal_table
+from posedyn.io.atomic import write_text_atomic
+from posedyn.io.cut import read_cut
 from posedyn.io.model_dir import load_model, save_model
 from posedyn.io.twin_file import load_twin
 from posedyn.posemodel import PoseModel, cross_validate
@@ -34,9 +36,12 @@ def train(
     seed: int = typer.Option(0, "--seed", help="Random seed (restarts, folds)."),
     restarts: int = typer.Option(1, "--restarts", help="Seeded restarts of the hyperparameter optimisation."),
     twin: Optional[Path] = typer.Option(None, "--twin", help="Twin file for --method physics (default: the shipped KR R2700 twin)."),
+    cut: Optional[Path] = typer.Option(None, "--cut", help="A cut file the model directory carries as its default cut (MODEL_DIR/cut.toml)."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
 ):
     """Train a pose -> modal-parameter model and cross-validate it."""
+    if cut is not None:
+        read_cut(cut)  # validate before training
     table = concat_tables([read_modal_table(f) for f in files])
     names = [c.strip() for c in features.split(",")] if features else None
     robot_twin = load_twin(twin) if method is Method.physics else None
@@ -46,6 +51,8 @@ def train(
 
     model = make().fit(table)
     save_model(model, out)
+    if cut is not None:
+        write_text_atomic(out / "cut.toml", cut.read_text(encoding="utf-8"))
     report = {"method": method.value, "n_poses": len(table.poses), "cv": {}}
     if cv:
         report["cv"] = cross_validate(make, table, folds=cv, seed=seed)
@@ -68,11 +75,15 @@ def train(
         console.print(f"physics prior: {model.physics_}")
     if report["cv"]:
         t = Table(title=f"{cv}-fold cross-validation over poses", title_justify="left")
-        for c in ("target", "R2 mean", "R2 std", "RMSE"):
+        for c in ("target", "R2 mean", "R2 std", "R2 pooled", "RMSE"):
             t.add_column(c, justify="right")
+        notes = set()
         for name, v in report["cv"].items():
-            t.add_row(name, f"{v['r2_mean']:.4f}", f"{v['r2_std']:.4f}", f"{v['rmse']:.4g}")
+            t.add_row(name, *("-" if v[k] is None else f"{v[k]:.4f}" for k in ("r2_mean", "r2_std", "r2_pooled")), f"{v['rmse']:.4g}")
+            notes.update([v["note"].split(":")[0]] if "note" in v else [])
         console.print(t)
+        for note in sorted(notes):
+            console.print(f"note: {note} (see --json)")
 
 
 def predict(

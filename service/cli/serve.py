@@ -14,7 +14,7 @@ import typer
 
 from posedyn.errors import InputError
 from posedyn.io import read_pose_table
-from service.cli.common import console
+from service.cli.common import console, resolve_cut
 from service.zenoh_service.client import ScheduleClient, ServiceError
 from service.zenoh_service.engine import ScheduleEngine
 from service.zenoh_service.protocol import RequestError
@@ -25,7 +25,7 @@ from service.zenoh_service.session import zenoh_config
 def serve(
     model: Path = typer.Option(..., "--model", help="Model directory (posedyn train)."),
     cell: str = typer.Option(..., "--cell", help="Cell name: keys live under cells/CELL/posedyn/."),
-    cut: Path = typer.Option(..., "--cut", help="Default cut (TOML); a request's cut fields override it."),
+    cut: Optional[Path] = typer.Option(None, "--cut", help="Default cut (TOML; default: MODEL_DIR/cut.toml); a request's cut fields override it."),
     listen: list[str] = typer.Option([], "--listen", help="Zenoh endpoint to listen on (repeatable), e.g. tcp/0.0.0.0:7447."),
     connect: list[str] = typer.Option([], "--connect", help="Zenoh endpoint to connect to (repeatable)."),
     mode: str = typer.Option("peer", "--mode", help="peer (embedded, default), client or router."),
@@ -33,7 +33,7 @@ def serve(
     state_dir: Optional[Path] = typer.Option(None, "--state-dir", help="Where published plans are kept (republished after a restart)."),
     absorber: Optional[Path] = typer.Option(None, "--absorber", help="Absorber file (default: seed 004's design)."),
     actuator: Optional[Path] = typer.Option(None, "--actuator", help="Actuator file (default: seed 000's)."),
-    twin: Optional[Path] = typer.Option(None, "--twin", help="Twin file for the reachability check when the model has none."),
+    twin: Optional[Path] = typer.Option(None, "--twin", help="Twin file for the reachability check when the model has none (default: the shipped KR R2700 twin)."),
     max_payload_bytes: int = typer.Option(65536, "--max-payload-bytes", min=64),
     queue_size: int = typer.Option(32, "--queue-size", min=1, help="Requests waiting for a computation before 'busy'."),
     workers: int = typer.Option(1, "--workers", min=1, help="Computation threads."),
@@ -42,6 +42,7 @@ def serve(
     """Serve per-pose schedules over Zenoh until SIGTERM or SIGINT."""
     if mode not in ("peer", "client", "router"):
         raise InputError("--mode peer, client or router", got=mode, column="--mode")
+    cut = resolve_cut(cut, model)
     for path in filter(None, (model, cut, config, absorber, actuator, twin)):
         if not path.exists():
             raise InputError("an existing file or directory", got="missing", file=str(path))

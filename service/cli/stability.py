@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import tempfile
 from enum import Enum
@@ -16,12 +17,12 @@ from posedyn.dynamics import ToolTipDynamics
 from posedyn.errors import InputError
 from posedyn.io import read_modal_table
 from posedyn.io.atomic import write_text_atomic
-from posedyn.stability import Cut, Discretization, StabilityModel
-from posedyn.stability import zoa
+from posedyn.stability import Cut, Discretization, StabilityModel, StabilityResult, critical_lobes, critical_points, zoa
 from service.cli.common import Milling, console, finite_or_none, print_json
 
 
 class Method(str, Enum):
+    floquet = "floquet"
     sdm = "sdm"
     zoa = "zoa"
 
@@ -34,8 +35,8 @@ KN = typer.Option(..., "--kn-mpa", help="Normal cutting-force coefficient Kn (MP
 IMMERSION = typer.Option(..., "--radial-immersion", help="Radial immersion a_e / D in (0, 1].")
 MILLING = typer.Option(Milling.down, "--milling", help="down or up milling.")
 FEED_ANGLE = typer.Option(0.0, "--feed-angle-deg", help="Feed direction measured from the table's x axis towards y.")
-STEPS = typer.Option(40, "--steps", help="Semi-discretization steps per delay.")
-ORDER = typer.Option(0, "--order", help="0: zeroth order (seed 004, weights 1/2); 1: first order.")
+STEPS = typer.Option(None, "--steps", min=4, help="Expert override: semi-discretization with this many steps per delay instead of the converged engine (its error is not estimated).")
+ORDER = typer.Option(0, "--order", help="With --steps: 0 zeroth order (seed 004, weights 1/2), 1 first order.")
 JSON = typer.Option(False, "--json", help="Print JSON.")
 
 
@@ -51,7 +52,7 @@ def _setup(modes: Path, pose_id, teeth, kt_mpa, kn_mpa, radial_immersion, millin
             milling=milling.value,
             feed_angle_deg=feed_angle_deg,
         )
-        disc = Discretization(steps=steps, order=order)
+        disc = Discretization(steps=steps or 40, order=order)
     except InputError as exc:
         raise exc.located(file=str(modes)) from None
     pose = pose_id if pose_id is not None else table.poses.pose_id[0]
@@ -73,39 +74,53 @@ def chatter(
     order: int = ORDER,
     as_json: bool = JSON,
 ):
-    """Critical depth and dominant chatter frequency at one spindle speed (semi-discretization)."""
+    """Critical depth and dominant chatter frequency at one spindle speed (converged to 2 %)."""
     pose, model = _setup(modes, pose_id, teeth, kt_mpa, kn_mpa, radial_immersion, milling, feed_angle_deg, steps, order)
     if not np.isfinite(rpm) or rpm <= 0:
         raise InputError("a spindle speed > 0", got=rpm, column="--rpm")
-    result = model.critical_depths([rpm])
-    family = [f for f, _ in result.family[0]]
+    if steps is None:
+        result = critical_points([model.dyn], model.cut, rpm)[0]
+        family = result.family
+    else:
+        sdm = model.critical_depths([rpm])
+        family = sdm.family[0]
+        result = StabilityResult(float(sdm.depth_m[0]), float(sdm.dominant_chatter_hz[0]), "sdm", None, float("nan"), steps)
     out = {
         "pose_id": pose,
         "rpm": rpm,
-        "critical_depth_mm": finite_or_none(result.depth_m[0] * 1e3),
-        "dominant_chatter_hz": finite_or_none(result.dominant_chatter_hz[0]),
-        "chatter_family_hz": family,
-        "method": "sdm",
-        "steps": steps,
+        "critical_depth_mm": finite_or_none(result.depth_m * 1e3),
+        "dominant_chatter_hz": finite_or_none(result.chatter_hz),
+        "chatter_family_hz": [f for f, _ in family],
+        **result.accuracy_json(),
     }
     if depth_mm is not None:
         if not np.isfinite(depth_mm) or depth_mm < 0:
             raise InputError("a depth >= 0", got=depth_mm, column="--depth-mm")
-        rho = float(model.spectral_radius(rpm, depth_mm * 1e-3))
-        out.update(spectral_radius=rho, stable=rho < 1.0)
+        if steps is None:
+            # the engine verifies that no boundary point lies below the critical depth
+            out.update(stable=bool(depth_mm * 1e-3 < result.depth_m))
+        else:
+            rho = float(model.spectral_radius(rpm, depth_mm * 1e-3))
+            out.update(spectral_radius=rho, stable=rho < 1.0)
     if as_json:
         print_json(out)
         return
-    table = Table(title=f"pose {pose} at {rpm:g} rpm (semi-discretization, {steps} steps)", title_justify="left")
+    how = "converged engine" if steps is None else f"semi-discretization, {steps} steps: error not estimated"
+    table = Table(title=f"pose {pose} at {rpm:g} rpm ({how})", title_justify="left")
     table.add_column("quantity")
     table.add_column("value", justify="right")
     depth = out["critical_depth_mm"]
-    table.add_row("critical depth", "never chatters" if depth is None else f"{depth:.4g} mm")
+    unknown = depth is None and not math.isinf(result.depth_m)
+    table.add_row("critical depth", ("could not be computed" if unknown else "never chatters") if depth is None else f"{depth:.4g} mm")
     if out["dominant_chatter_hz"] is not None:
         table.add_row("dominant chatter frequency", f"{out['dominant_chatter_hz']:.4g} Hz")
-        table.add_row("chatter family", ", ".join(f"{f:.4g} ({a:.0%})" for f, a in result.family[0]) + " Hz")
+        table.add_row("chatter family", ", ".join(f"{f:.4g} ({a:.0%})" for f, a in family) + " Hz")
+    if steps is None:
+        state = f"within {100 * result.rel_error_estimate:.2g} % (estimated)" if result.converged else f"NOT converged (estimated error {100 * result.rel_error_estimate:.2g} %)"
+        table.add_row("accuracy", state)
     if depth_mm is not None:
-        table.add_row(f"spectral radius at {depth_mm:g} mm", f"{out['spectral_radius']:.6f} ({'stable' if out['stable'] else 'CHATTER'})")
+        verdict = "stable" if out["stable"] else "CHATTER"
+        table.add_row(f"at {depth_mm:g} mm", verdict if steps is None else f"spectral radius {out['spectral_radius']:.6f} ({verdict})")
     console.print(table)
 
 
@@ -120,7 +135,7 @@ def lobes(
     kn_mpa: float = KN,
     radial_immersion: float = IMMERSION,
     milling: Milling = MILLING,
-    method: Method = typer.Option(Method.sdm, "--method", help="sdm (semi-discretization) or zoa (zeroth-order approximation)."),
+    method: Method = typer.Option(Method.floquet, "--method", help="floquet (converged engine), sdm (semi-discretization, --steps) or zoa (zeroth-order approximation)."),
     feed_angle_deg: float = FEED_ANGLE,
     steps: int = STEPS,
     order: int = ORDER,
@@ -135,7 +150,13 @@ def lobes(
     if rpm_steps < 2:
         raise InputError("at least 2 speeds", got=rpm_steps, column="--rpm-steps")
     rpm = np.linspace(rpm_min, rpm_max, rpm_steps)
-    if method is Method.sdm:
+    converged = None
+    if method is Method.floquet:
+        results = critical_lobes(model.dyn, model.cut, rpm)
+        depth = np.array([r.depth_m for r in results])
+        converged = [r.converged for r in results]
+        absolute = zoa.absolute_limit_m(model.dyn, model.cut)
+    elif method is Method.sdm:
         depth = model.critical_depths(rpm, frequencies=False).depth_m
         absolute, _ = model.absolute_limit_m()
     else:
@@ -143,6 +164,8 @@ def lobes(
         absolute = zoa.absolute_limit_m(model.dyn, model.cut)
     depth_mm = [finite_or_none(d * 1e3) for d in depth]
     out = {"rpm": rpm.tolist(), "critical_depth_mm": depth_mm, "absolute_limit_mm": finite_or_none(absolute * 1e3), "method": method.value}
+    if converged is not None:
+        out["converged"] = converged
     if csv_out is not None:
         _write_csv(csv_out, rpm, depth_mm)
     if plot is not None:

@@ -15,7 +15,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedCo
 from posedyn.errors import InputError
 from posedyn.io.cut import read_cut
 from service import html
-from service.cli.common import console
+from service.cli.common import console, resolve_cut
 from service.sweep import SweepSpec, representative_lobes, run_sweep, write_report
 
 
@@ -23,7 +23,7 @@ def sweep(
     model_dir: Optional[Path] = typer.Argument(None, help="Model directory (or give --twin)."),
     twin: Optional[Path] = typer.Option(None, "--twin", help="Robot twin file instead of a model (modes from the twin, no uncertainty)."),
     grid: Path = typer.Option(..., "--grid", help="Pose grid (TOML) or pose list / tool path (CSV with the pose columns)."),
-    cut: Path = typer.Option(..., "--cut", help="Cut file (TOML); an [sle] section adds the surface-location-error map."),
+    cut: Optional[Path] = typer.Option(None, "--cut", help="Cut file (TOML; default: MODEL_DIR/cut.toml); an [sle] section adds the surface-location-error map."),
     absorber: Optional[Path] = typer.Option(None, "--absorber", help="Absorber file (default: seed 004's design)."),
     actuator: Optional[Path] = typer.Option(None, "--actuator", help="Actuator file (default: seed 000's)."),
     out: Path = typer.Option(..., "--out", help="Output directory: chunks/, results.csv, results.parquet, report.html."),
@@ -31,7 +31,7 @@ def sweep(
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Address of a running Dask scheduler instead of a local cluster (the input files must be readable by its workers)."),
     resume: bool = typer.Option(False, "--resume", help="Keep the chunks already in --out and compute only the missing ones."),
     policy: str = typer.Option("match", "--policy", help="Absorber target: match (dominant chatter) or sims (max-min Re G; slow)."),
-    steps: int = typer.Option(20, "--steps", min=4, help="Semi-discretization steps per delay (20: within about 1 % of 40)."),
+    steps: Optional[int] = typer.Option(None, "--steps", min=4, help="Expert override: semi-discretization steps per delay instead of the converged engine (error not estimated)."),
     chunk_size: int = typer.Option(250, "--chunk-size", min=1, help="Poses per chunk (the unit of work, of writing and of resuming)."),
     lobes: bool = typer.Option(True, "--lobes/--no-lobes", help="Stability lobes at three representative poses in the report."),
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary instead of the table."),
@@ -39,6 +39,7 @@ def sweep(
     """Sweep the workspace: modes, chatter, absorber field, controller gain and SLE at every pose, on Dask; writes a self-contained HTML report."""
     if (model_dir is None) == (twin is None):
         raise InputError("either MODEL_DIR or --twin TWIN.toml", column="--twin")
+    cut = resolve_cut(cut, model_dir)
     for path in filter(None, (model_dir, twin, grid, cut, absorber, actuator)):
         if not path.exists():
             raise InputError("an existing file or directory", got="missing", file=str(path))
@@ -50,7 +51,7 @@ def sweep(
         absorber=str(absorber.resolve()) if absorber else None,
         actuator=str(actuator.resolve()) if actuator else None,
         policy=policy,
-        steps=steps,
+        steps=steps if steps is not None else read_cut(cut)[2],
         chunk_size=chunk_size,
     )
     show = sys.stderr.isatty() and not as_json

@@ -3,7 +3,7 @@ synthetic campaigns from the twin with named effects hidden in them.
 
 Baseline per quantity: `fn_hz` and `k_n_per_m` of a direction's mode from the twin (or a trained
 model) as a modal table numbers them; `k_xy_n_per_m` zero (the modal-table model has no cross
-terms); `critical_depth_mm` from the semi-discretization of the pose's x-y modes at the row's
+terms); `critical_depth_mm` from the converged stability engine on the pose's x-y modes at the row's
 `rpm` with the cut file; `absorber_fn_hz` and `absorber_zeta` from the MRF absorber model at the
 row's `field_mt`.
 """
@@ -15,20 +15,17 @@ from pathlib import Path
 
 import numpy as np
 
-from absorber.chain import critical_depths
 from absorber.files import read_absorber
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.errors import InputError
 from posedyn.gap import LIBRARY, Measurements, predict
 from posedyn.io.cut import read_cut
 from posedyn.io.model_dir import load_model
-from posedyn.io.shipped import SEED004_CUT
 from posedyn.io.twin_file import load_twin
 from posedyn.robot import GridPose, direction_rows, pose_modes, tool_pose
+from posedyn.stability import critical_points
 from posedyn.table import JOINT_COLUMNS, ORIENTATION_COLUMNS, POSITION_COLUMNS, Mode, PoseSet
 
-#: Semi-discretization steps of the critical-depth rows (the campaign's depths carry 3 % noise).
-DEPTH_STEPS = 20
 
 #: Noise of generated measurements: relative std per quantity (k_xy: of sqrt(k_x k_y)).
 NOISE = {"fn_hz": 0.003, "k_n_per_m": 0.03, "k_xy_n_per_m": 0.02, "critical_depth_mm": 0.03, "absorber_fn_hz": 0.005, "absorber_zeta": 0.05}
@@ -45,7 +42,7 @@ class Baseline:
             self.model = load_model(model_dir)
         else:
             self.robot, self.params = load_twin(twin_file)
-        self.cut, _, _ = read_cut(cut_file or SEED004_CUT)
+        self.cut = read_cut(cut_file)[0] if cut_file is not None else None
         self.absorber = read_absorber(absorber_file)
 
     def pose_rows(self, m: Measurements) -> dict:
@@ -99,6 +96,8 @@ class Baseline:
                 if not np.isfinite(m.column("rpm")[i]):
                     raise InputError("an rpm for a critical_depth_mm row", row=i + 1, column="rpm")
                 depth_rows.append(i)
+        if depth_rows and self.cut is None:
+            raise InputError("a cut for the critical_depth_mm rows (--cut CUT.toml, or a model directory trained with --cut)", row=depth_rows[0] + 1, column="--cut")
         if depth_rows:
             structures = []
             for i in depth_rows:
@@ -106,8 +105,8 @@ class Baseline:
                 structures.append(ToolTipDynamics.from_modes(
                     x=[Mode(*rows[k]) for k in sorted(rows) if k[0] == "x"], y=[Mode(*rows[k]) for k in sorted(rows) if k[0] == "y"]
                 ))
-            depths = critical_depths(structures, self.cut, m.column("rpm")[depth_rows], DEPTH_STEPS, frequencies=False)
-            y[depth_rows] = [d * 1e3 for d, _ in depths]
+            results = critical_points(structures, self.cut, m.column("rpm")[depth_rows], frequencies=False)
+            y[depth_rows] = [r.depth_m * 1e3 for r in results]
         conditions = dict(m.conditions, model_k_n_per_m=model_k, model_k_x_n_per_m=kx, model_k_y_n_per_m=ky)
         return y, replace(m, conditions=conditions)
 

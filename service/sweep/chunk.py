@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from absorber.chain import PoseModes, ScheduleConfig, coupled, critical_depths, schedule_poses, table_pose_modes
+from absorber.chain import PoseModes, ScheduleConfig, coupled, schedule_poses, table_pose_modes
 from absorber.files import read_absorber, read_actuator
 from posedyn.errors import InputError
 from posedyn.io.cut import read_cut, read_sle_cut
@@ -28,6 +28,7 @@ from posedyn.io.twin_file import load_twin
 from posedyn.posemodel import PoseModel
 from posedyn.robot import GridPose, Robot, TwinParameters, direction_rows, pose_modes, tool_pose
 from posedyn.sle import SleCut, sle_m
+from posedyn.stability import critical_lobes
 from posedyn.table import PoseSet
 from service.sweep.spec import RESULT_COLUMNS, SweepSpec
 
@@ -132,6 +133,9 @@ def _result_columns(result) -> dict:
         flags.append("outside_absorber_range")
     if c is None or not (c["dvf_gain_ns_per_m"] > 0 and c["virtual_absorber"]["force_ok"]):
         flags.append("force_limit")
+    if result.stability.converged is False or result.stability_with_absorber.converged is False:
+        flags.append("stability_not_converged")
+    errors = [r.rel_error_estimate for r in (result.stability, result.stability_with_absorber) if math.isfinite(r.rel_error_estimate)]
     row.update(
         lowest_fn_hz=lowest[2],
         lowest_fn_std_hz=lowest[5],
@@ -147,6 +151,8 @@ def _result_columns(result) -> dict:
         gain_margin_db=c["gain_margin_db"] if c and math.isfinite(c["gain_margin_db"]) else None,
         controller_force_n=c["max_force_n"] if c else None,
         dynamic_stiffness_gain_pct=c["dynamic_stiffness_gain_pct"] if c else None,
+        stability_method=result.stability.method,
+        stability_rel_error=max(errors) if errors else None,
         flags=";".join(flags),
     )
     return row
@@ -159,8 +165,8 @@ def _mm(depth_m: float):
 # --- lobes at representative poses -------------------------------------------------------------
 
 
-def representative_lobes(spec_json: str, poses: PoseSet, rows: list[dict], grid_twin: str | None = None, speeds: int = 80) -> list[dict]:
-    """Stability lobes (the chain's `critical_depths`, `steps` of the sweep) from 0.5 to 1.5 times the
+def representative_lobes(spec_json: str, poses: PoseSet, rows: list[dict], grid_twin: str | None = None, speeds: int = 40) -> list[dict]:
+    """Stability lobes (`posedyn.stability.critical_lobes`, the sweep's engine) from 0.5 to 1.5 times the
     cut's speed, without and with the absorber at its scheduled field, at the poses with the
     smallest, the median and the largest critical depth."""
     ctx = context(spec_json, grid_twin)
@@ -177,7 +183,7 @@ def representative_lobes(spec_json: str, poses: PoseSet, rows: list[dict], grid_
         field_t = rows[i]["field_mt"] * 1e-3
         curves = []
         for dyn in (found[i].dyn, coupled(found[i].dyn, ctx.schedule, field_t)):
-            depths = critical_depths([dyn] * speeds, ctx.schedule.cut, rpm, ctx.schedule.steps, frequencies=False)
-            curves.append([d * 1e3 if math.isfinite(d) else None for d, _ in depths])
+            results = critical_lobes(dyn, ctx.schedule.cut, rpm, ctx.schedule.steps)
+            curves.append([r.depth_m * 1e3 if math.isfinite(r.depth_m) else None for r in results])
         out.append({"label": label, "pose_id": poses.pose_id[i], "rpm": rpm.tolist(), "depth_mm": curves[0], "depth_with_absorber_mm": curves[1], "field_mt": rows[i]["field_mt"], "cut_rpm": ctx.schedule.rpm})
     return out

@@ -200,7 +200,7 @@ def _read_chunk(path: Path) -> list[dict]:
 def _parse(column: str, text: str):
     if text == "":
         return None
-    if column in ("pose_id", "flags", "actuator_direction"):
+    if column in ("pose_id", "flags", "actuator_direction", "stability_method"):
         return text
     if text in ("true", "false"):
         return text == "true"

@@ -32,6 +32,8 @@ RESULT_COLUMNS = (
     "controller_force_n",
     "dynamic_stiffness_gain_pct",
     "sle_um",
+    "stability_method",
+    "stability_rel_error",
     "flags",
 )
 
@@ -42,7 +44,8 @@ class SweepSpec:
 
     `model` (a model directory) or `twin` (a robot-twin file) gives the modes; `poses` is a grid
     (TOML) or a pose list (CSV); `cut` a cut file, optionally with an `[sle]` section;
-    `steps` is the semi-discretization's steps per delay (20: depths within about 1 % of 40)."""
+    `steps` overrides the converged stability engine with the semi-discretization (expert use;
+    its error is not estimated); None (default) or the cut file's `[stability] steps`."""
 
     poses: str
     cut: str
@@ -51,15 +54,15 @@ class SweepSpec:
     absorber: str | None = None
     actuator: str | None = None
     policy: str = "match"
-    steps: int = 20
+    steps: int | None = None
     chunk_size: int = 250
 
     def __post_init__(self):
         if (self.model is None) == (self.twin is None):
             raise InputError("either a model directory or a twin file", got={"model": self.model, "twin": self.twin}, column="model")
         check_choice("policy", self.policy, POLICIES)
-        if not isinstance(self.steps, int) or self.steps < 4:
-            raise InputError("an integer number of steps >= 4", got=self.steps, column="steps")
+        if self.steps is not None and (not isinstance(self.steps, int) or self.steps < 4):
+            raise InputError("an integer number of steps >= 4 (or none: the converged engine)", got=self.steps, column="steps")
         if not isinstance(self.chunk_size, int) or self.chunk_size < 1:
             raise InputError("a chunk size >= 1", got=self.chunk_size, column="chunk_size")
 

@@ -3,7 +3,6 @@ entry out, from a trained model. No network here; the service calls it off the Z
 
 from __future__ import annotations
 
-import math
 import threading
 from dataclasses import replace
 from pathlib import Path
@@ -24,8 +23,8 @@ from service.zenoh_service.protocol import RequestError
 class ScheduleEngine:
     """A loaded model, the default cut and the absorber and controller settings.
 
-    Poses are checked before any prediction: inverse kinematics on the model's twin (or on the
-    given twin file) must succeed (`unreachable_pose`), and each of the model's pose features
+    Poses are checked before any prediction: inverse kinematics on the model's twin (else the
+    given twin file, else the shipped KR R2700 twin) must succeed (`unreachable_pose`), and each of the model's pose features
     must lie within its training range widened by a quarter of that range, at least 50 mm or
     15 deg (`outside_workspace`: a Gaussian process far from its data returns its prior)."""
 
@@ -36,7 +35,7 @@ class ScheduleEngine:
         self.absorber = read_absorber(absorber)
         self.control = read_actuator(actuator)
         self.robot = self.model.twin[0] if self.model.twin is not None else None
-        if self.robot is None and twin is not None:
+        if self.robot is None:  # the one rule: the model's twin, else the given one, else the shipped twin
             self.robot, _ = load_twin(twin)
         X = self.model.X_train_ * self.model.x_scale_ + self.model.x_mean_
         lo, hi = X.min(axis=0), X.max(axis=0)
@@ -88,14 +87,3 @@ def canonical(pose: dict, cut: dict) -> str:
     """A cache key for a (pose, cut) request, independent of the pose's id and of field order."""
     numbers = {k: v for k, v in pose.items() if k != "pose_id"}
     return repr((sorted((k, float(v)) for k, v in numbers.items()), sorted((k, v if isinstance(v, str) else float(v)) for k, v in cut.items())))
-
-
-def finite_json(value):
-    """Replace non-finite floats (a depth that never chatters) by None, recursively."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: finite_json(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [finite_json(v) for v in value]
-    return value

@@ -32,8 +32,9 @@ import zenoh
 from zenoh.ext import CacheConfig, declare_advanced_publisher
 
 from posedyn.io.atomic import write_text_atomic
+from posedyn.io.json_values import json_ready
 from service.zenoh_service import keys
-from service.zenoh_service.engine import ScheduleEngine, canonical, finite_json
+from service.zenoh_service.engine import ScheduleEngine, canonical
 from service.zenoh_service.protocol import RequestError, parse_plan_request, parse_schedule_request, valid_plan_id
 
 log = logging.getLogger("posedyn.service")
@@ -230,7 +231,7 @@ class ScheduleService:
             entry = self._cache.get(key)
         if entry is None:
             self._count("computations")
-            entry = finite_json(self.scheduler.entry(pose, cut))
+            entry = json_ready(self.scheduler.entry(pose, cut))
             entry.update(model_version=self.scheduler.model_version, computed_at=_now(), stale_after_s=self.settings.stale_after_s)
             with self._cache_lock:
                 self._cache[key] = entry

@@ -1,0 +1,108 @@
+"""Critical depth and dominant chatter frequency of structures at a speed: the one entry point
+every user-facing stability number goes through (`posedyn chatter`, the per-pose chain behind
+`posedyn schedule`, the sweep, the service and the gap workflow).
+
+By default the converged engine (`floquet`: the exact Floquet characteristic equation, with its
+resolution chosen from the cut until the estimated relative error is below `REL_TOL`, and a
+multiplier count below the reported depth that guarantees no lower boundary point was missed).
+`steps` is the expert override: the semi-discretization with that many steps per delay, whose
+error is not estimated (`converged` None) - at low speed with kHz modes it can be off by 2x.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from posedyn.dynamics import ToolTipDynamics
+from posedyn.stability import floquet
+from posedyn.stability.batch import BatchStability
+from posedyn.stability.cutting import Cut
+from posedyn.stability.model import Discretization
+
+#: Relative accuracy every default result reaches (or says it did not).
+REL_TOL = 0.02
+#: Relative bisection tolerance of the semi-discretization override.
+SDM_REL_TOL = 2e-3
+
+
+@dataclass(frozen=True)
+class StabilityResult:
+    """Critical depth (m; inf: never chatters), dominant chatter frequency (Hz; NaN when not
+    asked or undefined) and the accuracy reached."""
+
+    depth_m: float
+    chatter_hz: float
+    method: str  # "floquet" (converged engine) or "sdm" (override)
+    converged: bool | None  # None: not estimated (the semi-discretization override)
+    rel_error_estimate: float  # NaN where not estimated
+    steps: int | None = None  # the override's steps per delay
+    family: tuple = ()  # ((hz, relative tool-tip amplitude), ...), largest first
+
+    def accuracy_json(self) -> dict:
+        out = {"method": self.method, "converged": self.converged,
+               "rel_error_estimate": self.rel_error_estimate if math.isfinite(self.rel_error_estimate) else None}
+        if self.steps is not None:
+            out["steps"] = self.steps
+        return out
+
+
+def critical_points(structures: list[ToolTipDynamics], cut: Cut, rpm, steps: int | None = None, frequencies: bool = True, verify: bool = True) -> list[StabilityResult]:
+    """The StabilityResult of each structure at its speed (`rpm` one value or one per
+    structure); `steps` switches to the semi-discretization override. A structure the engine
+    fails on numerically comes back not converged with an infinite error estimate and a NaN
+    depth (unknown), never as an exception that takes the other structures down."""
+    structures = list(structures)
+    rpm = np.broadcast_to(np.asarray(rpm, dtype=float), (len(structures),))
+    if not structures:
+        return []
+    if steps is None:
+        return [_converged_or_flagged(p, frequencies) for p in _floquet_points(structures, cut, rpm, verify)]
+    return _sdm_points(structures, cut, rpm, steps, frequencies)
+
+
+def _floquet_points(structures, cut, rpm, verify):
+    """The engine's CriticalPoints, or None for a structure it could not solve (a numerical
+    failure in one structure must not take the batch down: the batch is retried one by one)."""
+    try:
+        return floquet.critical_depths(structures, cut, rpm, rel_tol=REL_TOL, verify=verify)
+    except (np.linalg.LinAlgError, FloatingPointError, ValueError, ZeroDivisionError):
+        if len(structures) == 1:
+            return [None]
+        return [_floquet_points([s], cut, [r], verify)[0] for s, r in zip(structures, rpm)]
+
+
+def _converged_or_flagged(point, frequencies: bool) -> StabilityResult:
+    if point is None:
+        return StabilityResult(math.nan, math.nan, "floquet", False, math.inf)  # unknown, not "never chatters"
+    return StabilityResult(point.depth_m, point.chatter_hz if frequencies else math.nan, "floquet", bool(point.converged), float(point.rel_error_estimate), family=tuple(point.family))
+
+
+def _sdm_points(structures, cut, rpm, steps, frequencies) -> list[StabilityResult]:
+    out: list[StabilityResult] = [None] * len(structures)
+    groups: dict[int, list[int]] = {}
+    for i, dyn in enumerate(structures):
+        groups.setdefault(dyn.n_modes, []).append(i)
+    for members in groups.values():
+        batch = BatchStability([structures[i] for i in members], cut, rpm[members], Discretization(steps))
+        result = batch.critical_depths(frequencies=frequencies, rel_tol=SDM_REL_TOL, guess_m=7.0 * batch.scale_m, rungs=2)
+        for j, i in enumerate(members):
+            out[i] = StabilityResult(float(result.depth_m[j]), float(result.dominant_chatter_hz[j]), "sdm", None, math.nan, steps, tuple(result.family[j]))
+    return out
+
+
+def critical_lobes(dyn: ToolTipDynamics, cut: Cut, rpm, steps: int | None = None) -> list[StabilityResult]:
+    """The StabilityResult of one structure at many speeds (stability lobes): the converged
+    engine's batched `floquet.lobes` by default (converged per speed, but without the multiplier
+    count that rules out a missed lower branch: 300 verified speeds take minutes), the
+    semi-discretization with `steps`."""
+    rpm = np.atleast_1d(np.asarray(rpm, dtype=float))
+    if steps is not None:
+        return critical_points([dyn] * len(rpm), cut, rpm, steps, frequencies=False)
+    lobes = floquet.lobes(dyn, cut, rpm, rel_tol=REL_TOL)  # not verified per speed (about 10x the cost): see the README
+    return [
+        StabilityResult(float(d), float(f), "floquet", bool(c), float(e))
+        for d, f, c, e in zip(lobes.depth_m, lobes.chatter_hz, lobes.converged, lobes.rel_error_estimate)
+    ]

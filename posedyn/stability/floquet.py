@@ -1,0 +1,1170 @@
+"""Critical depth and chatter frequency without a resolution knob (issue 17): the exact Floquet
+characteristic equation of the milling delay equation, solved on the stability boundary.
+
+Why not more semi-discretization steps
+--------------------------------------
+The semi-discretization (`sdm`) approximates the delayed position q(t - tau) inside each step by
+a constant or a line. A spindle mode at 5.4 kHz with a tooth period of 10 ms (2000 rpm, 3 teeth)
+oscillates 55 times per delay, so the history needs several steps per vibration period (the
+project measured 3.30 / 3.99 / 2.31 / 1.68 mm at 40 / 80 / 160 / 320 steps, 1.51 mm converged),
+and the monodromy matrix grows with it (N = 2n + n m).
+
+The characteristic equation
+---------------------------
+A Floquet solution with multiplier mu != 0 satisfies q(t - tau) = nu q(t), nu = 1 / mu, for all t
+(the delay equals the period). Substituted into
+
+    q'' + C q' + K q = a Phi_R^T H(t) Phi_L (q(t - tau) - q(t))
+
+this leaves an ordinary periodic ODE for z = [q; q'] with the complex parameter c = a (1 - nu),
+
+    z' = A(t, c) z,   A = [[0, I], [-(K + c W(t)), -C]],   W = Phi_R^T H Phi_L,
+
+and mu is a multiplier exactly when det(I - nu M(c)) = 0, M(c) the 2n x 2n monodromy matrix of
+that ODE over one tooth period. No history is discretized: every mode, however fast, is
+propagated by exact matrix exponentials. The only approximation is W(t): the tooth period is
+cut at every tooth entry and exit (so H is smooth on each segment), free-flight segments are one
+exponential of the free structure, and each cutting segment is split into sub-steps on which W
+is replaced by its exact average (the same closed-form integrals as `sdm`). The error of that
+comes from the variation of H with the tool angle, not from the modes: it needs a few sub-steps
+per radian of engagement whatever the spindle speed or the mode frequencies.
+
+On the stability boundary |mu| = 1, mu = exp(i theta), and the critical depth is the smallest
+a > 0 for which F(a, theta) = det(I - exp(-i theta) M(a (1 - exp(-i theta)))) = 0 for some
+theta (D-subdivision: at a = 0 all multipliers are the free structure's, inside the unit circle;
+h(nu) = det(I - nu M(c(nu))) is entire in nu with h(0) = 1, so multipliers enter |mu| >= 1 only
+through the circle). Two real unknowns (a, theta), one complex equation, solved as
+g(a, theta) = ln(nu sigma) = 0 for one eigenvalue sigma of M(c) followed by its eigenvector
+(dg/dnu = 1/nu exactly; d ln sigma / dc by one difference, then secant updates: one monodromy
+per Newton iteration, batched over seeds, speeds and structures). Seeds: the zeroth-order
+crossings (Altintas-Budak) at the given speed, the lowest MAX_SEEDS plus the lowest
+SEEDS_PER_MODE of every mode band, each starting on the eigenvector that lives on its mode
+(following "the eigenvalue nearest 1" instead jumps to robot-mode multipliers, which sit near
+the unit circle at low delay; that was the prototype's 1000 rpm miss). Once picked, the
+eigenvalue is followed by inverse iteration from the predicted one (a full eigen-decomposition
+only where that does not settle on the same eigenvector).
+
+Cost. The seed search runs on band projections (`ProjectedCharacteristic`, `mode_bands`): the
+free structure's eigen-pairs are grouped where their frequencies are separated by more than
+BAND_GAP, and a seed of one band is refined on the pairs within BAND_WIDEN of it (spindle seeds
+without the robot modes and vice versa; free flight is diagonal there), which makes the matrix
+exponentials several times cheaper. Every candidate is then re-solved on the whole structure
+(Newton from the lifted eigenvector) before anything is compared, verified or reported, so the
+projection only decides where Newton starts. Seeds are pruned while they iterate (`_prune`,
+STALL): one heading to a point already converged, one PRUNE_ABOVE x above its job's lowest
+converged point, one whose |g| stays large. The refinement after the search (levels, full
+structure) is batched over all jobs (`_finish_all`).
+
+Verification (`verify=True`): the number of multipliers outside the unit circle at
+VERIFY_FRACTION x the depth is the number of zeros of h(nu) = det(I - nu M(a (1 - nu))) in
+|nu| < 1 (argument principle, `unstable_count`, adaptive theta grid). Count 0 with every grid
+step resolved (< pi/4 in phase, < x4 in modulus) means no boundary point lies below 0.98 x the
+reported depth, up to the resolution of the phase sampling (a zero pair closer to the circle
+than the sampling can see is not excluded) and the coarse level's W(t) error. A non-zero count
+triggers `_repair` (bisection in depth on the count, then Newton) and the result says
+`repaired=True`.
+
+The critical depth is the smallest converged boundary point. Its resolution is chosen, not
+given: the boundary point is found with `SUBSTEPS_PER_RAD` sub-steps per radian of cutting,
+re-solved (Newton from the coarse root) with twice as many, and the difference is the error
+estimate (the error decreases at least linearly in the sub-step length, so the difference bounds
+the error of the finer value); the resolution doubles until the estimate is below rel_tol / 2.
+
+Dominant chatter frequency: as `chatter.chatter_frequencies` defines it (Dombovari et al. 2011):
+the Floquet solution at the critical point is exp(i theta t / tau) p(t) with p tau-periodic;
+the members of the family |theta / tau + j w_T| are weighted by the tool-tip amplitude of the
+j-th Fourier coefficient of p, here integrated exactly (segment by segment, in the eigenbasis of
+each segment's constant A) instead of from samples.
+
+Dynamically irrelevant modes: a mode whose peak tool-tip compliance |phi_L| |phi_R| / (2 zeta w^2)
+is below `IRRELEVANT` times the largest mode's is left out of the search (uncoupled tables
+only); the final boundary point is then re-solved on the full structure by Newton from the
+reduced one, so the reported depth and frequency are those of the full model either way.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from posedyn.dynamics import ToolTipDynamics
+from posedyn.errors import InputError
+from posedyn.stability import sdm
+from posedyn.stability.cutting import Cut, engaged_integral, mean_force_matrix
+
+#: Sub-steps per radian of tool angle in a cutting segment, coarsest level.
+SUBSTEPS_PER_RAD = 4.0
+#: Finest level tried (sub-steps per radian) before giving up on rel_tol.
+MAX_SUBSTEPS_PER_RAD = 128.0
+#: Modes with peak compliance below this fraction of the largest are left out of the search.
+IRRELEVANT = 1e-3
+#: Seeds refined at the coarse level (lowest zeroth-order depths first), plus the lowest
+#: SEEDS_PER_MODE of every mode's band.
+MAX_SEEDS = 12
+SEEDS_PER_MODE = 4
+#: Seeds are refined at SUBSTEPS_PER_RAD / 2**SEED_LEVELS_BELOW (1: cheaper monodromies, but
+#: Newton from a zeroth-order seed then lands on another branch more often; measured, not worth it).
+SEED_LEVELS_BELOW = 0
+#: A seed is dropped once it is this many times above its job's lowest converged boundary point.
+PRUNE_ABOVE = 2.5
+#: Seed search on bands of the free structure's eigen-pairs (`mode_bands`): a gap of more than
+#: BAND_GAP in frequency separates bands, a band's projection keeps the pairs within BAND_WIDEN
+#: of its frequency range. PROJECT_SEEDS = False searches on the whole structure.
+PROJECT_SEEDS = True
+BAND_GAP = 4.0
+BAND_WIDEN = 3.0
+#: Newton tolerance (relative step) of the refinements after the seed search.
+REFINE_TOL = 1e-6
+#: Seed pruning: (iteration, |g|) pairs; a seed with |g| above the bound at or after the
+#: iteration is dropped (Newton from a good seed is in its quadratic basin by then).
+STALL = ((3, 4.0), (5, 1.0), (8, 0.05))
+#: Boundary points within this fraction of the lowest are refined too and reported as branches.
+NEAR_TIE = 0.10
+#: Uniform theta samples of the winding count (plus the known boundary points' thetas and
+#: the free structure's multiplier angles; the grid is then refined adaptively).
+VERIFY_POINTS = 64
+#: The winding count is taken at this fraction of the reported depth.
+VERIFY_FRACTION = 0.98
+#: Frequency grid: half-width around each mode in units of zeta w, and points per w_T.
+BAND_ZETAS = 8.0
+POINTS_PER_TOOTH_FREQUENCY = 10
+
+
+@dataclass(frozen=True, eq=False)
+class CriticalPoint:
+    """Critical depth (m, inf when no boundary point was found), dominant chatter frequency (Hz),
+    theta = angle of the critical multiplier (rad, in [0, pi]; pi: flip), the chatter-frequency
+    family ((hz, relative amplitude), largest first), the resolution used (sub-steps per radian),
+    the relative error estimate and whether it is within rel_tol."""
+
+    rpm: float
+    depth_m: float
+    chatter_hz: float
+    theta_rad: float
+    family: tuple
+    substeps_per_rad: float
+    rel_error_estimate: float
+    converged: bool
+    verified: bool | None = None
+    branches: tuple = ()
+    repaired: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class Lobes:
+    rpm: np.ndarray
+    depth_m: np.ndarray
+    chatter_hz: np.ndarray
+    theta_rad: np.ndarray
+    rel_error_estimate: np.ndarray
+    converged: np.ndarray
+
+
+# --- structure and segments ---------------------------------------------------------------------
+
+
+def relevant_modes(dyn: ToolTipDynamics) -> np.ndarray:
+    """Indices of the modes kept in the search: all of them for a coupled structure, otherwise
+    those whose peak compliance |phi_L| |phi_R| / (2 zeta w^2) is at least IRRELEVANT times the
+    largest one's."""
+    if dyn.coupling is not None:
+        return np.arange(dyn.n_modes)
+    peak = np.linalg.norm(dyn.shapes, axis=0) * np.linalg.norm(dyn.force_shapes, axis=0) / (2.0 * dyn.zeta * dyn.wn_rad_s**2)
+    return np.flatnonzero(peak >= IRRELEVANT * peak.max())
+
+
+def _subset(dyn: ToolTipDynamics, keep: np.ndarray) -> ToolTipDynamics:
+    if len(keep) == dyn.n_modes:
+        return dyn
+    right = None if dyn.shapes_force is None else dyn.shapes_force[:, keep]
+    return ToolTipDynamics(dyn.fn_hz[keep], dyn.zeta[keep], dyn.shapes[:, keep], None, right)
+
+
+def segment_angles(cut: Cut, substeps_per_rad: float):
+    """Tool-angle intervals of one tooth period cut at every tooth entry and exit, cutting
+    intervals split into sub-steps: (lo, hi, H averages (s, 2, 2), cutting mask). Cached per
+    (cut, resolution); the arrays are read-only."""
+    try:
+        return _segment_angles_cached(cut, float(substeps_per_rad))
+    except TypeError:  # an unhashable cut
+        return _segment_angles(cut, float(substeps_per_rad))
+
+
+@functools.lru_cache(maxsize=64)
+def _segment_angles_cached(cut: Cut, substeps_per_rad: float):
+    out = _segment_angles(cut, substeps_per_rad)
+    for x in out:
+        x.setflags(write=False)
+    return out
+
+
+def _segment_angles(cut: Cut, substeps_per_rad: float):
+    pitch = 2.0 * np.pi / cut.teeth
+    st, ex = cut.engagement_rad
+    events = np.mod(np.array([st - j * pitch for j in range(cut.teeth)] + [ex - j * pitch for j in range(cut.teeth)]), pitch)
+    events = np.unique(np.concatenate([[0.0, pitch], events]))
+    lo, hi, cutting = [], [], []
+    for a, b in zip(events[:-1], events[1:]):
+        if b - a < 1e-12 * pitch:
+            continue
+        mean = engaged_integral(cut, np.array(a), np.array(b))
+        if np.abs(mean).max() <= 1e-12 * (abs(cut.kt_pa) + abs(cut.kn_pa)) * (b - a):
+            lo.append(a)
+            hi.append(b)
+            cutting.append(False)
+            continue
+        k = max(2, int(np.ceil(substeps_per_rad * (b - a) - 1e-9)))
+        edges = np.linspace(a, b, k + 1)
+        lo += list(edges[:-1])
+        hi += list(edges[1:])
+        cutting += [True] * k
+    lo, hi, cutting = np.array(lo), np.array(hi), np.array(cutting)
+    H = engaged_integral(cut, lo, hi) / (hi - lo)[:, None, None]
+    H[~cutting] = 0.0
+    # merge adjacent free-flight intervals (one exponential)
+    return lo, hi, H, cutting
+
+
+class FloquetCharacteristic:
+    """det(I - nu M(c)) of one structure and cut at one resolution, batched over (c, nu, tau)."""
+
+    def __init__(self, dyn: ToolTipDynamics, cut: Cut, substeps_per_rad: float):
+        self.dyn, self.cut, self.substeps_per_rad = dyn, cut, substeps_per_rad
+        turned = dyn.rotated(np.deg2rad(cut.feed_angle_deg))
+        self.shapes = turned.shapes
+        lo, hi, H, cutting = segment_angles(cut, substeps_per_rad)
+        self.fraction = (hi - lo) / (2.0 * np.pi / cut.teeth)  # of the tooth period
+        self.start = lo / (2.0 * np.pi / cut.teeth)
+        self.cutting = cutting
+        self.W = np.einsum("ir,sij,jq->srq", turned.force_shapes, H, turned.shapes)
+        self.n = n = dyn.n_modes
+        K, C = dyn.stiffness_matrix, dyn.damping_matrix
+        self.scale = w = np.sqrt(np.abs(K).max())
+        A0 = np.zeros((2 * n, 2 * n))
+        A0[:n, n:] = w * np.eye(n)
+        A0[n:, :n] = -K / w
+        A0[n:, n:] = -C
+        self.A0 = A0
+        self.force_shapes = turned.force_shapes
+        self.S = np.zeros((2, 2 * n))  # balanced state -> tool tip
+        self.S[:, :n] = turned.shapes / w
+
+    def free_eig(self):
+        """Eigen-decomposition of A0 (cached)."""
+        if getattr(self, "_free_eig", None) is None:
+            self._free_eig = np.linalg.eig(self.A0.astype(complex))
+        return self._free_eig
+
+    def frf(self, omega) -> np.ndarray:
+        """Tool-tip receptance (..., 2, 2) of the (turned) structure from the eigen-decomposition
+        of A0: G = S V diag(1 / (i w - lam)) V^-1 [0; Phi_R^T]."""
+        if getattr(self, "_frf_parts", None) is None:
+            lam, V = self.free_eig()
+            inp = np.zeros((2 * self.n, 2))
+            inp[self.n :] = self.force_shapes.T
+            self._frf_parts = (lam, self.S @ V, self.free_eig_inverse() @ inp)
+        lam, left, right = self._frf_parts
+        w = np.asarray(omega, dtype=float)[..., None]
+        return np.einsum("dk,...k,ke->...de", left, 1.0 / (1j * w - lam), right)
+
+    def free_eig_inverse(self):
+        if getattr(self, "_free_eig_inv", None) is None:
+            self._free_eig_inv = np.linalg.inv(self.free_eig()[1])
+        return self._free_eig_inv
+
+    def generators(self, c: np.ndarray) -> np.ndarray:
+        """A_i(c) for every segment, (s, B, 2n, 2n) complex (balanced coordinates)."""
+        n = self.n
+        c = np.asarray(c, dtype=complex).reshape(-1)
+        A = np.broadcast_to(self.A0, (len(self.fraction), len(c), 2 * n, 2 * n)).astype(complex)
+        A[:, :, n:, :n] -= c[None, :, None, None] * self.W[:, None] / self.scale
+        return A
+
+    def monodromy(self, c: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """M(c) over one tooth period tau, (B, 2n, 2n). Free-flight segments use A0 (no c)."""
+        c = np.asarray(c, dtype=complex).reshape(-1)
+        tau = np.broadcast_to(np.asarray(tau, dtype=float).reshape(-1), c.shape)
+        n2 = 2 * self.n
+        cut_idx = np.flatnonzero(self.cutting)
+        A = self.generators(c)[cut_idx] * (self.fraction[cut_idx, None] * tau[None, :])[:, :, None, None]
+        E = np.empty((len(self.fraction), len(c), n2, n2), dtype=complex)
+        E[cut_idx] = sdm.expm_batched(A.reshape(-1, n2, n2)).reshape(len(cut_idx), len(c), n2, n2)
+        free_idx = np.flatnonzero(~self.cutting)
+        if len(free_idx):  # independent of c: once per distinct delay
+            utau, inverse = np.unique(tau, return_inverse=True)
+            Af = self.A0[None, None] * (self.fraction[free_idx, None] * utau[None, :])[:, :, None, None]
+            Ef = sdm.expm_batched(Af.reshape(-1, n2, n2).astype(complex)).reshape(len(free_idx), len(utau), n2, n2)
+            E[free_idx] = Ef[:, inverse.reshape(-1)]
+        M = E[0]
+        for i in range(1, len(E)):
+            M = E[i] @ M
+        return M
+
+    def log_char(self, a, theta, tau, h: float = 1e-6):
+        """ln F and its derivatives in a and theta at nu = exp(-i theta), c = a (1 - nu).
+        F = det(I - nu M(c)); d ln F / d nu = -tr((I - nu M)^-1 M), d ln F / dc by a relative
+        difference of M in c."""
+        a, theta, tau = (np.asarray(x, dtype=float).reshape(-1) for x in np.broadcast_arrays(a, theta, tau))
+        nu = np.exp(-1j * theta)
+        c = a * (1.0 - nu)
+        dc = h * np.maximum(np.abs(c), 1e-30)
+        M2 = self.monodromy(np.concatenate([c, c + dc]), np.concatenate([tau, tau]))
+        M, Mp = M2[: len(c)], M2[len(c) :]
+        eye = np.eye(M.shape[-1])
+        D = eye - nu[:, None, None] * M
+        sign, logdet = np.linalg.slogdet(D)
+        with np.errstate(all="ignore"):
+            X = _solve_each(D, np.concatenate([M, (Mp - M) / dc[:, None, None]], axis=2))
+        n2 = M.shape[-1]
+        L_nu = -np.trace(X[:, :, :n2], axis1=1, axis2=2)
+        L_c = -nu * np.trace(X[:, :, n2:], axis1=1, axis2=2)
+        L = logdet + np.log(sign)
+        dL_da = L_c * (1.0 - nu)
+        dL_dth = L_nu * (-1j * nu) + L_c * (1j * a * nu)
+        return L, dL_da, dL_dth, np.abs(D).max(axis=(1, 2))
+
+
+class ProjectedCharacteristic:
+    """A FloquetCharacteristic restricted to some eigen-pairs of the free structure (a band of
+    modes): z = T xi with A0 T = T diag(lam), so free flight is diagonal and a cutting segment's
+    generator is diag(lam) + c Tl B_s T (Tl the matching rows of T^-1). Used for the seed search
+    only (the neighbouring bands act on a seed's branch quasi-statically); every candidate is
+    re-solved on the full characteristic. Coordinates: pair k at k and m + k (m pairs)."""
+
+    def __init__(self, full: FloquetCharacteristic, pairs):
+        lam, V = full.free_eig()
+        Vinv = full.free_eig_inverse()
+        sel = np.concatenate([[p[0] for p in pairs], [p[1] for p in pairs]]).astype(int)
+        self.T, self.Tl, self.lam = V[:, sel], Vinv[sel, :], lam[sel]
+        n = full.n
+        self.Bs = -np.einsum("ri,sij,jq->srq", self.Tl[:, n:], full.W, self.T[:n, :]) / full.scale
+        self.fraction, self.start, self.cutting = full.fraction, full.start, full.cutting
+
+    def monodromy(self, c: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        c = np.asarray(c, dtype=complex).reshape(-1)
+        tau = np.broadcast_to(np.asarray(tau, dtype=float).reshape(-1), c.shape)
+        r = len(self.lam)
+        cut_idx = np.flatnonzero(self.cutting)
+        A = c[None, :, None, None] * self.Bs[cut_idx, None]
+        A[..., np.arange(r), np.arange(r)] += self.lam
+        A = A * (self.fraction[cut_idx, None] * tau[None, :])[:, :, None, None]
+        Ec = sdm.expm_batched(A.reshape(-1, r, r)).reshape(len(cut_idx), len(c), r, r)
+        M = None
+        k = 0
+        for i in range(len(self.fraction)):
+            if self.cutting[i]:
+                E = Ec[k]
+                k += 1
+                M = E if M is None else E @ M
+            else:  # free flight: diagonal
+                d = np.exp(self.lam[None, :] * (self.fraction[i] * tau)[:, None])  # (B, r)
+                M = d[:, :, None] * (np.eye(r) if M is None else M)
+        return M
+
+    def lift(self, xi: np.ndarray) -> np.ndarray:
+        z = xi @ self.T.T
+        return z / np.linalg.norm(z, axis=1, keepdims=True)
+
+
+def mode_bands(char: FloquetCharacteristic):
+    """Eigen-pairs of the free structure grouped into bands for the seed search: pairs sorted by
+    frequency |Im lam| are split where consecutive frequencies differ by more than BAND_GAP;
+    each band's projection holds the pairs within BAND_WIDEN of its range. Returns (pairs
+    [(i, j) eigen indices], pair frequencies, band of every pair, [pair indices of every band's
+    projection]) or None when the spectrum does not pair up or nothing would be left out."""
+    lam, _ = char.free_eig()
+    pos = np.flatnonzero(lam.imag > 0)
+    real = np.flatnonzero(lam.imag == 0)
+    taken = np.zeros(len(lam), bool)
+    pairs = []
+    for i in pos:
+        d = np.abs(lam - np.conj(lam[i]))
+        d[taken | (lam.imag >= 0)] = np.inf
+        j = int(np.argmin(d))
+        if not np.isfinite(d[j]) or d[j] > 1e-6 * abs(lam[i]):
+            return None
+        taken[j] = True
+        pairs.append((int(i), j))
+    if len(real) % 2:
+        return None
+    real = real[np.argsort(np.abs(lam[real]))]
+    pairs += [(int(real[k]), int(real[k + 1])) for k in range(0, len(real), 2)]
+    if len(pairs) * 2 != len(lam):
+        return None
+    freq = np.array([max(abs(lam[i].imag), 1e-9) for i, _ in pairs])
+    order = np.argsort(freq)
+    band = np.zeros(len(pairs), int)
+    b = 0
+    for k in range(1, len(order)):
+        if freq[order[k]] > BAND_GAP * freq[order[k - 1]]:
+            b += 1
+        band[order[k]] = b
+    members = []
+    for bb in range(b + 1):
+        f = freq[band == bb]
+        members.append(np.flatnonzero((freq >= f.min() / BAND_WIDEN) & (freq <= f.max() * BAND_WIDEN)))
+    if all(len(m) == len(pairs) for m in members):
+        return None
+    return pairs, freq, band, members
+
+
+# --- seeds --------------------------------------------------------------------------------------
+
+
+def _solve_each(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Batched solve in which a singular (or non-finite) element gives NaN instead of an
+    exception for the whole batch."""
+    try:
+        return np.linalg.solve(A, b)
+    except np.linalg.LinAlgError:
+        out = np.full(np.broadcast_shapes(A.shape[:-2], b.shape[:-2]) + b.shape[-2:], np.nan, dtype=np.result_type(A, b))
+        for i in range(len(A)):
+            try:
+                out[i] = np.linalg.solve(A[i], b[i])
+            except np.linalg.LinAlgError:
+                pass
+        return out
+
+
+def _eig2(A: np.ndarray) -> np.ndarray:
+    """Eigenvalues of 2 x 2 matrices along a grid, (k, 2), the square root's sign kept
+    continuous along the grid (branches that are continuous in frequency)."""
+    tr = A[:, 0, 0] + A[:, 1, 1]
+    det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
+    s = np.sqrt(tr**2 / 4.0 - det)
+    flip = np.ones(len(s))
+    if len(s) > 1:
+        turn = (s[1:] * np.conj(s[:-1])).real < 0
+        flip[1:] = np.cumprod(np.where(turn, -1.0, 1.0))
+    s = s * flip
+    return np.stack([tr / 2.0 + s, tr / 2.0 - s], axis=1)
+
+
+def zoa_seeds(dyn: ToolTipDynamics, cut: Cut, tau: float, char: FloquetCharacteristic | None = None):
+    """(depth, theta in [0, 2 pi), mode index) of the zeroth-order boundary points at delay tau: sign changes
+    of Im a(w) with Re a > 0, a(w) = -1 / ((1 - exp(-i w tau)) Lambda(G(i w) H0)), on a grid
+    around each mode (BAND_ZETAS zeta w each side, POINTS_PER_TOOTH_FREQUENCY points per w_T).
+    With `char` (a characteristic of `dyn`) G comes from its free eigen-decomposition
+    (O(n) per frequency instead of a solve for coupled structures)."""
+    turned = dyn.rotated(np.deg2rad(cut.feed_angle_deg))
+    if char is not None:
+        frf = char.frf
+    else:
+        frf = turned.frf
+    H0 = mean_force_matrix(cut)
+    wT = 2.0 * np.pi / tau
+    depths, thetas, modes = [], [], []
+    for r, (w, z) in enumerate(zip(dyn.wn_rad_s, dyn.zeta)):
+        half = max(BAND_ZETAS * z, 0.02) * w
+        spacing = min(z * w / 10.0, wT / POINTS_PER_TOOTH_FREQUENCY)
+        count = int(min(20000, max(50, np.ceil(2 * half / spacing))))
+        grid = np.linspace(max(w - half, 1e-3 * w), w + half, count)
+        lam = _eig2(frf(grid) @ H0)  # (k, 2)
+        lam[np.abs(lam) <= 1e-9 * np.abs(lam).max()] = 0.0  # round-off of a zero eigenvalue is no branch
+        with np.errstate(all="ignore"):
+            a = -1.0 / ((1.0 - np.exp(-1j * grid * tau))[:, None] * lam)
+        for b in range(2):
+            im, re = a[:-1, b].imag, a[:-1, b].real
+            im2, re2 = a[1:, b].imag, a[1:, b].real
+            change = np.flatnonzero((np.sign(im) != np.sign(im2)) & (re > 0) & (re2 > 0) & np.isfinite(im) & np.isfinite(im2))
+            for j in change:
+                t = im[j] / (im[j] - im2[j])
+                d = re[j] + t * (re2[j] - re[j])
+                # a jump of Im a through infinity (1 - exp(-i w tau) -> 0) is not a crossing
+                if abs(a[j + 1, b] - a[j, b]) > 0.5 * max(abs(a[j, b]), abs(a[j + 1, b])):
+                    continue
+                wc = grid[j] + t * (grid[j + 1] - grid[j])
+                depths.append(d)
+                thetas.append(np.mod(wc * tau, 2.0 * np.pi))
+                modes.append(r)
+    return np.array(depths), np.array(thetas), np.array(modes, dtype=int)
+
+
+# --- boundary-point solvers ---------------------------------------------------------------------
+
+
+def _follow_eig(M, vec, sig0, iterations: int = 3):
+    """Eigenpair of every M (B, N, N) continuing `vec` (unit, B x N): inverse iteration with the
+    shift updated by sigma += 1 / (v^H (M - sigma)^-1 v), from sig0. Returns sigma, unit v and
+    whether the pair is accepted (small residual and overlap >= 0.9 with `vec`)."""
+    eye = np.eye(M.shape[-1])
+    v, sig = vec, np.array(sig0, dtype=complex)
+    with np.errstate(all="ignore"):
+        for _ in range(iterations):
+            shift = sig * (1.0 + 1e-10) + 1e-300  # never exactly an eigenvalue
+            try:
+                x = _solve_each(M - shift[:, None, None] * eye, v[:, :, None])[:, :, 0]
+            except np.linalg.LinAlgError:
+                return sig, vec, np.zeros(len(sig), bool)
+            sig = shift + 1.0 / np.einsum("bi,bi->b", np.conj(v), x)
+            v = x / np.linalg.norm(x, axis=1, keepdims=True)
+        res = np.linalg.norm(np.einsum("bij,bj->bi", M, v) - sig[:, None] * v, axis=1)
+        scale = np.abs(M).max(axis=(1, 2))
+        overlap = np.abs(np.einsum("bi,bi->b", np.conj(vec), v))
+    ok = np.isfinite(sig) & np.all(np.isfinite(v), axis=1) & (res <= 1e-9 * scale) & (overlap >= 0.9)
+    return sig, v, ok
+
+
+def _critical_log(char, a, theta, tau, target=None, idx=None, mode=None, vec=None):
+    """g = ln(nu sigma) for one eigenvalue sigma of M(a (1 - nu)), nu = exp(-i theta); the
+    boundary is g = 0. Batched. The branch is followed by its eigenvector: the eigenvalue whose
+    eigenvector overlaps most with `vec` (previous evaluation; by inverse iteration from the
+    predicted eigenvalue, full eigen-decomposition where that does not settle); at a seed, among
+    the eigenvectors living on the seed's `mode` (q_r, q_r'), the one nearest to 1; otherwise
+    nearest `target`. Returns g (Im wrapped to (-pi, pi]) and the unit eigenvectors picked."""
+    if idx is not None and hasattr(char, "take"):
+        char = char.take(idx)
+    nu = np.exp(-1j * theta)
+    M = char.monodromy(a * (1.0 - nu), tau)
+    rows = np.arange(len(a))
+    out_g = np.empty(len(a), dtype=complex)
+    out_v = np.empty((len(a), M.shape[-1]), dtype=complex)
+    todo = rows
+    if vec is not None:
+        vec = vec / np.linalg.norm(vec, axis=1, keepdims=True)
+        if target is not None:
+            sig0 = np.exp(target) / nu
+        else:
+            sig0 = np.einsum("bi,bij,bj->b", np.conj(vec), M, vec)
+        sig_f, v_f, ok_f = _follow_eig(M, vec, sig0)
+        with np.errstate(all="ignore"):
+            g_f = np.log(sig_f * nu)
+        ok_f &= np.isfinite(g_f)
+        out_g[ok_f], out_v[ok_f] = g_f[ok_f], v_f[ok_f]
+        todo = rows[~ok_f]
+        if not len(todo):
+            return out_g, out_v
+    Mt, nut = M[todo], nu[todo]
+    sig, V = np.linalg.eig(Mt)
+    V = V / np.linalg.norm(V, axis=1, keepdims=True)
+    sig = sig * nut[:, None]
+    with np.errstate(all="ignore"):
+        lg = np.log(sig)
+    r = np.arange(len(todo))
+    ref = np.zeros(len(todo), dtype=complex) if target is None else target[todo]
+    dist = np.abs(lg - ref[:, None])
+    if vec is not None:
+        overlap = np.abs(np.einsum("bi,bij->bj", np.conj(vec[todo]), V))
+        score = overlap / (1.0 + dist)
+        pick = np.argmax(np.where(np.isfinite(score), score, -1.0), axis=1)
+    else:
+        if mode is not None:
+            md = mode[todo]
+            n = M.shape[-1] // 2
+            w = np.abs(V) ** 2
+            share = (w[r, md] + w[r, n + md]) / w.sum(axis=1)
+            share = np.where((md >= 0)[:, None], share, 1.0)
+            dist = np.where(share >= 0.5 * share.max(axis=1, keepdims=True), dist, np.inf)
+        pick = np.argmin(dist, axis=1)
+    out_g[todo], out_v[todo] = lg[r, pick], V[r, :, pick]
+    return out_g, out_v
+
+
+def _newton(char, a, theta, tau, iterations: int = 25, tol: float = 1e-8, Gc=None, mode=None, vec=None, group=None):
+    """Newton on g(a, theta) = ln(nu sigma(M(a (1 - nu)))) = 0, two real unknowns, batched.
+    dg/dnu = 1 / nu exactly; G_c = d ln sigma / dc by one finite difference at the start
+    (or the `Gc` given), then secant (Broyden) updates from the iterates: one monodromy per
+    iteration. `group` (one id per element: the seeds of one job) enables pruning: an element
+    is dropped once it heads to a point of its group already converged, once it is more than
+    PRUNE_ABOVE x above the group's lowest converged point, or when it stalls (|g| > 1 after 8
+    iterations, > 0.05 after 12). Returns a, theta, converged, Gc."""
+    a, theta, tau = (np.array(x, dtype=float).reshape(-1) for x in np.broadcast_arrays(a, theta, tau))
+    B = len(a)
+    if not B:
+        return a, theta, np.zeros(0, bool), np.zeros(0, complex), None
+    g, vec = _critical_log(char, a, theta, tau, mode=None if mode is None else np.asarray(mode, dtype=int).reshape(-1), vec=vec)
+    if Gc is None:
+        h = 1e-4
+        a2 = a * (1.0 + h)
+        g2, _ = _critical_log(char, a2, theta, tau, target=g, vec=vec)
+        nu = np.exp(-1j * theta)
+        with np.errstate(all="ignore"):
+            Gc = (g2 - g) / (h * a * (1.0 - nu))
+    else:
+        Gc = np.broadcast_to(np.asarray(Gc, dtype=complex), (B,)).copy()
+    done = np.zeros(B, bool)
+    dead = ~np.isfinite(g) | (a <= 0) | ~np.isfinite(Gc)
+    for k in range(iterations):
+        act = np.flatnonzero(~done & ~dead)
+        if not len(act):
+            break
+        aa, th, G = a[act], theta[act], Gc[act]
+        nu = np.exp(-1j * th)
+        ga = G * (1.0 - nu)
+        gt = -1j + G * (1j * aa * nu)
+        J = np.stack([np.stack([ga.real, gt.real], 1), np.stack([ga.imag, gt.imag], 1)], 1)
+        r = np.stack([g[act].real, g[act].imag], 1)
+        with np.errstate(all="ignore"):  # 2 x 2 by Cramer's rule: a singular J marks its element bad, not the batch
+            det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
+            step = -np.stack([J[:, 1, 1] * r[:, 0] - J[:, 0, 1] * r[:, 1], J[:, 0, 0] * r[:, 1] - J[:, 1, 0] * r[:, 0]], 1) / det[:, None]
+        bad = ~np.all(np.isfinite(step), axis=1)
+        step[bad] = 0.0
+        limit = np.maximum(np.abs(step[:, 0]) / (0.3 * aa), np.abs(step[:, 1]) / 0.5)
+        step /= np.maximum(limit, 1.0)[:, None]
+        a_new, t_new = aa + step[:, 0], th + step[:, 1]
+        g_pred = g[act] + ga * step[:, 0] + gt * step[:, 1]
+        g_new, v_new = _critical_log(char, a_new, t_new, tau[act], target=g_pred, idx=act, vec=vec[act])
+        vec[act] = v_new
+        # secant update of G_c: g_new - g = dln(nu) + G dc
+        nu_new = np.exp(-1j * t_new)
+        dc = a_new * (1.0 - nu_new) - aa * (1.0 - nu)
+        dlnnu = -1j * step[:, 1]
+        with np.errstate(all="ignore"):
+            G_upd = (g_new - g[act] - dlnnu) / dc
+        ok = np.isfinite(G_upd) & (np.abs(dc) > 1e-12 * np.abs(aa))
+        Gc[act[ok]] = G_upd[ok]
+        a[act], theta[act], g[act] = a_new, t_new, g_new
+        small = (np.abs(step[:, 0]) < tol * aa) & (np.abs(step[:, 1]) < tol) & (np.abs(g_new) < 1e-6)
+        done[act[small]] = True
+        dead[act[bad | (a_new <= 0) | ~np.isfinite(g_new) | ((k > 10) & (np.abs(g_new) > 0.5))]] = True
+        if group is not None:
+            ag = np.abs(g_new)
+            dead[act[((k >= STALL[0][0]) & (ag > STALL[0][1])) | ((k >= STALL[1][0]) & (ag > STALL[1][1])) | ((k >= STALL[2][0]) & (ag > STALL[2][1]))]] = True
+            _prune(a, theta, g, done, dead, np.asarray(group))
+    ok = done & ~dead & (a > 0)
+    theta = np.mod(theta, 2.0 * np.pi)
+    return a, theta, ok, Gc, vec
+
+
+def _prune(a, theta, g, done, dead, group):
+    """Marks dead the active elements that are heading to a converged point of their group
+    (|g| < 0.1, depth within 1 %, theta within 0.01 up to conjugation) or lie PRUNE_ABOVE x above the
+    group's lowest converged depth."""
+    fin = np.flatnonzero(done & ~dead)
+    act = np.flatnonzero(~done & ~dead)
+    if not len(fin) or not len(act):
+        return
+    best = np.full(group.max() + 1, np.inf)
+    np.minimum.at(best, group[fin], a[fin])
+    dead[act[a[act] > PRUNE_ABOVE * best[group[act]]]] = True
+    act = act[~dead[act]]
+    if not len(act):
+        return
+    folded = np.mod(theta, 2.0 * np.pi)
+    folded = np.where(folded > np.pi, 2.0 * np.pi - folded, folded)
+    order = np.lexsort((a[fin], group[fin]))
+    fg, fa, ft = group[fin][order], a[fin][order], folded[fin][order]
+    key_f = fg * 4.0 + np.log(fa) / 1e3  # depths are far below exp(1e3)
+    pos = np.searchsorted(key_f, group[act] * 4.0 + np.log(a[act]) / 1e3)
+    for off in (-1, 0):
+        p = np.clip(pos + off, 0, len(fin) - 1)
+        same = (fg[p] == group[act]) & (np.abs(fa[p] - a[act]) <= 1e-2 * fa[p]) & (np.abs(ft[p] - folded[act]) <= 1e-2) & (np.abs(g[act]) < 0.1)
+        dead[act[same]] = True
+
+
+def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int | None = None, max_points: int = 4096, extra=()):
+    """Number of Floquet multipliers outside the unit circle at depth a (argument principle):
+    zeros of h(nu) = det(I - nu M(a (1 - nu))) in |nu| < 1 (h entire, h(0) = 1, conjugate
+    symmetric). The phase of h is followed over theta in [0, pi] (nu = exp(-i theta)), the grid
+    refined wherever consecutive samples differ by more than pi / 4 in phase or by a factor 4
+    in modulus, and count = -(phase change) / pi. Returns (count, resolved, theta of the
+    smallest |h| / |h|_scale sample). `extra`: thetas sampled besides the uniform grid of
+    `start` (VERIFY_POINTS) points, e.g. the known boundary points and the free multipliers'
+    angles, where the phase turns fastest."""
+    th = np.linspace(0.0, np.pi, VERIFY_POINTS if start is None else start)
+    extra = np.mod(np.asarray(extra, dtype=float).reshape(-1), 2.0 * np.pi)
+    extra = np.where(extra > np.pi, 2.0 * np.pi - extra, extra)
+    if len(extra):
+        th = np.unique(np.concatenate([th, extra]))
+
+    def sample(t):
+        M = char.monodromy(a * (1.0 - np.exp(-1j * t)), np.full(len(t), tau))
+        sign, logdet = np.linalg.slogdet(np.eye(M.shape[-1]) - np.exp(-1j * t)[:, None, None] * M)
+        return np.angle(sign), logdet
+
+    ph, lm = sample(th)
+    resolved = False
+    while True:
+        d = np.angle(np.exp(1j * np.diff(ph)))
+        rough = (np.abs(d) > np.pi / 4) | (np.abs(np.diff(lm)) > np.log(4.0))
+        if not rough.any():
+            resolved = True
+            break
+        if len(th) + rough.sum() > max_points:
+            break
+        mid = 0.5 * (th[:-1] + th[1:])[rough]
+        pm, lmm = sample(mid)
+        th = np.concatenate([th, mid])
+        ph = np.concatenate([ph, pm])
+        lm = np.concatenate([lm, lmm])
+        order = np.argsort(th)
+        th, ph, lm = th[order], ph[order], lm[order]
+    d = np.angle(np.exp(1j * np.diff(ph)))
+    count = int(np.rint(-d.sum() / np.pi))
+    return count, resolved, float(th[np.argmin(lm)])
+
+
+
+
+# --- chatter frequency --------------------------------------------------------------------------
+
+
+def floquet_family(char: FloquetCharacteristic, a: float, theta: float, tau: float, keep: float = 0.05):
+    """(dominant Hz, ((Hz, relative amplitude), ...)) of the Floquet solution with multiplier
+    exp(i theta) at depth a: Fourier coefficients of p(t) = u(t) exp(-i theta t / tau), integrated
+    exactly over every segment (eigenbasis of its constant A)."""
+    nu = np.exp(-1j * theta)
+    c = a * (1.0 - nu)
+    M = char.monodromy(np.array([c]), np.array([tau]))[0]
+    values, vectors = np.linalg.eig(M)
+    z = vectors[:, np.argmin(np.abs(values - 1.0 / nu))]
+    wT = 2.0 * np.pi / tau
+    top = char.dyn.wn_rad_s.max()
+    K = int(np.ceil(2.0 * top / wT)) + 4
+    j = np.arange(-K, K + 1)
+    omega = theta / tau + j * wT
+    cut_idx = np.flatnonzero(char.cutting)
+    lam = np.empty((len(char.fraction), len(z)), dtype=complex)
+    V = np.empty((len(char.fraction), len(z), len(z)), dtype=complex)
+    if len(cut_idx):
+        lam[cut_idx], V[cut_idx] = np.linalg.eig(char.generators(np.array([c]))[cut_idx, 0])
+    if len(cut_idx) < len(char.fraction):  # free flight: one eigen-decomposition of A0
+        lam0, V0 = char.free_eig()
+        lam[~char.cutting], V[~char.cutting] = lam0, V0
+    dt, t0 = char.fraction * tau, char.start * tau
+    Y = np.empty_like(lam)
+    for i in range(len(dt)):
+        Y[i] = y = np.linalg.solve(V[i], z)
+        z = V[i] @ (np.exp(lam[i] * dt[i]) * y)
+    x = lam[:, None, :] - 1j * omega[None, :, None]  # (s, J, 2n)
+    # exp(x dt) = exp(lam dt) exp(-i omega dt), the second factor per (segment, harmonic) only
+    e = np.exp(lam * dt[:, None])[:, None, :] * np.exp(-1j * omega[None, :] * dt[:, None])[:, :, None]
+    with np.errstate(all="ignore"):
+        g = (e - 1.0) / x
+    tiny = np.abs(x) * dt[:, None, None] < 1e-6
+    if tiny.any():
+        g[tiny] = np.broadcast_to(dt[:, None, None], g.shape)[tiny]
+    P = np.einsum("dk,skm->sdm", char.S, V)  # (s, 2, 2n)
+    coeff = np.sum(np.exp(-1j * omega[None, :] * t0[:, None])[:, :, None] * ((g * Y[:, None, :]) @ np.swapaxes(P, 1, 2)), axis=0)
+    amplitude = np.sqrt(np.sum(np.abs(coeff) ** 2, axis=1))
+    freq = np.abs(omega) / (2.0 * np.pi)
+    order = np.argsort(-amplitude)
+    top_amp = amplitude[order[0]]
+    family = tuple((float(freq[k]), float(amplitude[k] / top_amp)) for k in order if amplitude[k] >= keep * top_amp)
+    return float(freq[order[0]]), family
+
+
+# --- public API ---------------------------------------------------------------------------------
+
+
+def critical_depth(dyn: ToolTipDynamics, cut: Cut, rpm: float, rel_tol: float = 0.02, substeps_per_rad: float | None = None, verify: bool = True) -> CriticalPoint:
+    """Critical axial depth (m) and dominant chatter frequency at one spindle speed, resolution
+    chosen automatically (`substeps_per_rad` overrides the coarsest level); `verify` runs the
+    winding count at VERIFY_FRACTION x the depth (and repairs a missed lower branch)."""
+    return _solve([dyn], cut, np.array([float(rpm)]), rel_tol, substeps_per_rad, verify)[0][0]
+
+
+def critical_depths(structures, cut: Cut, rpm, rel_tol: float = 0.02, substeps_per_rad: float | None = None, verify: bool = False) -> list:
+    """`critical_depth` for many structures (e.g. one per pose), each at its own speed (`rpm`
+    scalar or one per structure). Structures with the same number of modes share the batched
+    Newton iterations."""
+    structures = list(structures)
+    rpm = np.broadcast_to(np.asarray(rpm, dtype=float), (len(structures),))
+    out = [None] * len(structures)
+    groups: dict = {}
+    for i, s in enumerate(structures):
+        groups.setdefault(s.n_modes, []).append(i)
+    for idx in groups.values():
+        res = _solve([structures[i] for i in idx], cut, rpm[idx], rel_tol, substeps_per_rad, verify, pairs=True)
+        for i, r in zip(idx, res):
+            out[i] = r[0]
+    return out
+
+
+def lobes(dyn: ToolTipDynamics, cut: Cut, rpm, rel_tol: float = 0.02, substeps_per_rad: float | None = None, verify: bool = False) -> Lobes:
+    """`critical_depth` at many speeds, Newton iterations batched over speeds."""
+    rpm = np.atleast_1d(np.asarray(rpm, dtype=float))
+    points = _solve([dyn], cut, rpm, rel_tol, substeps_per_rad, verify, branch_families=False)[0]
+    return Lobes(
+        rpm=rpm,
+        depth_m=np.array([p.depth_m for p in points]),
+        chatter_hz=np.array([p.chatter_hz for p in points]),
+        theta_rad=np.array([p.theta_rad for p in points]),
+        rel_error_estimate=np.array([p.rel_error_estimate for p in points]),
+        converged=np.array([p.converged for p in points]),
+    )
+
+
+class _Batch:
+    """Several FloquetCharacteristics (same mode count) evaluated as one: element e of a batch
+    belongs to structure owner[e]."""
+
+    def __init__(self, chars, owner):
+        self.chars, self.owner = chars, np.asarray(owner)
+
+    def monodromy(self, c, tau):
+        c = np.asarray(c, dtype=complex).reshape(-1)
+        tau = np.broadcast_to(np.asarray(tau, dtype=float).reshape(-1), c.shape)
+        if len(self.chars) == 1:
+            return self.chars[0].monodromy(c, tau)
+        out = None
+        for s in np.unique(self.owner):
+            m = self.owner == s
+            Ms = self.chars[s].monodromy(c[m], tau[m])
+            if out is None:
+                out = np.empty((len(c),) + Ms.shape[1:], dtype=complex)
+            out[m] = Ms
+        return out
+
+    def take(self, idx):
+        return _Batch(self.chars, self.owner[idx])
+
+
+def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branch_families=True):
+    """pairs=False: every structure at every speed; pairs=True: structure i at rpm[i] only.
+    Returns, per structure, the list of CriticalPoints."""
+    rpm = np.asarray(rpm, dtype=float).reshape(-1)
+    if np.any(~np.isfinite(rpm) | (rpm <= 0)):
+        raise InputError("spindle speeds > 0 rpm", got=rpm[~np.isfinite(rpm) | (rpm <= 0)][0], column="rpm")
+    base = SUBSTEPS_PER_RAD if substeps_per_rad is None else float(substeps_per_rad)
+    keeps = [relevant_modes(d) for d in dyns]
+    smalls = [_subset(d, k) for d, k in zip(dyns, keeps)]
+    cache: dict = {}
+    seed_level = -SEED_LEVELS_BELOW
+
+    def char(s, level, full=False):
+        key = (s, level, full or len(keeps[s]) == dyns[s].n_modes)
+        if key not in cache:
+            cache[key] = FloquetCharacteristic(dyns[s] if key[2] else smalls[s], cut, base * 2.0**level)
+        return cache[key]
+
+    # (structure, speed) jobs
+    if pairs:
+        jobs = [(s, s) for s in range(len(dyns))]
+    else:
+        jobs = [(s, e) for s in range(len(dyns)) for e in range(len(rpm))]
+    tau_all = np.asarray(cut.tooth_period_s(rpm), dtype=float).reshape(-1)
+    # 1. zeroth-order seeds: per mode band the lowest few, overall the lowest MAX_SEEDS
+    seed_job, seed_a, seed_t, seed_m = [], [], [], []
+    for j, (s, e) in enumerate(jobs):
+        d, t, mode = zoa_seeds(smalls[s], cut, tau_all[e], char(s, 0))
+        pick = set(np.argsort(d)[:MAX_SEEDS].tolist())
+        for m in np.unique(mode):
+            idx = np.flatnonzero(mode == m)
+            pick |= set(idx[np.argsort(d[idx])[:SEEDS_PER_MODE]].tolist())
+        pick = sorted(pick)
+        seed_job += [j] * len(pick)
+        seed_a += list(d[pick])
+        seed_t += list(t[pick])
+        seed_m += list(mode[pick])
+    seed_job, seed_a, seed_t, seed_m = np.array(seed_job, int), np.array(seed_a), np.array(seed_t), np.array(seed_m, int)
+    owners = np.array([jobs[j][0] for j in seed_job], int)
+    seed_tau = tau_all[[jobs[j][1] for j in seed_job]] if len(seed_job) else np.zeros(0)
+    # the characteristic each seed is refined on: its band's projection, or the whole structure
+    search, key_of = [], {}
+    seed_key = np.zeros(len(seed_a), int)
+    seed_mode = seed_m.copy()
+    bands = {}
+    for i in range(len(seed_a)):
+        s_ = owners[i]
+        if PROJECT_SEEDS:
+            if s_ not in bands:
+                bands[s_] = mode_bands(char(s_, seed_level))
+                if bands[s_] is not None:  # the pair whose eigenvector lives most on each mode
+                    c_ = char(s_, seed_level)
+                    V = c_.free_eig()[1]
+                    w2 = np.abs(V) ** 2
+                    w2 = w2 / w2.sum(axis=0, keepdims=True)
+                    on_mode = w2[: c_.n] + w2[c_.n :]  # (mode, eigenvector)
+                    first = np.array([p[0] for p in bands[s_][0]])
+                    bands[s_] = bands[s_] + (np.argmax(on_mode[:, first], axis=1),)
+            info = bands[s_]
+        else:
+            info = None
+        if info is None:
+            key = (s_, -1)
+        else:
+            pairs_, freq, band, members = info[:4]
+            k = int(info[4][seed_m[i]])
+            key = (s_, int(band[k]))
+            seed_mode[i] = int(np.flatnonzero(members[band[k]] == k)[0]) if k in members[band[k]] else -1
+        if key not in key_of:
+            key_of[key] = len(search)
+            if key[1] < 0:
+                search.append(char(s_, seed_level))
+            else:
+                pairs_, freq, band, members = info[:4]
+                search.append(ProjectedCharacteristic(char(s_, seed_level), [pairs_[q] for q in members[key[1]]]))
+        seed_key[i] = key_of[key]
+    size = np.array([len(search[k].lam) if isinstance(search[k], ProjectedCharacteristic) else 2 * search[k].n for k in seed_key], int)
+    a0 = np.full(len(seed_a), np.nan)
+    t0 = np.full(len(seed_a), np.nan)
+    ok0 = np.zeros(len(seed_a), bool)
+    v0 = [None] * len(seed_a)
+    g0 = np.full(len(seed_a), np.nan, complex)
+    for sz in np.unique(size):
+        sel = np.flatnonzero(size == sz)
+        batch = _Batch(search, seed_key[sel])
+        a_, t_, ok_, gc_, vec_ = _newton(batch, seed_a[sel], seed_t[sel], seed_tau[sel], tol=1e-5, mode=seed_mode[sel], group=seed_job[sel])
+        a0[sel], t0[sel], ok0[sel], g0[sel] = a_, t_, ok_, gc_
+        for q, i in enumerate(sel):
+            if ok_[q]:
+                ch = search[seed_key[i]]
+                v0[i] = ch.lift(vec_[q : q + 1])[0] if isinstance(ch, ProjectedCharacteristic) else vec_[q]
+                if t_[q] > np.pi:
+                    v0[i] = np.conj(v0[i])
+
+    cands = []
+    for j in range(len(jobs)):
+        m = np.flatnonzero((seed_job == j) & ok0)
+        keep = _dedupe(a0[m], t0[m], index=True)
+        m = m[keep]
+        cands.append((a0[m], np.where(t0[m] > np.pi, 2 * np.pi - t0[m], t0[m]), [v0[i] for i in m], np.where(t0[m] > np.pi, np.conj(g0[m]), g0[m])))
+    points = _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol, verify, seed_level, branch_families)
+    results = [[None] * (len(rpm) if not pairs else 1) for _ in dyns]
+    for j, (s, e) in enumerate(jobs):
+        results[s][0 if pairs else e] = points[j]
+    return results
+
+
+def _batched_step(char, keeps, level, a, t, tau, owner, Gc, vec, full=False):
+    """`_step_level` for boundary points of several structures (owner[i]), one batch per
+    matrix size."""
+    a_new, t_new = a.copy(), t.copy()
+    ok = np.zeros(len(a), bool)
+    Gc_new = np.zeros(len(a), complex)
+    vec_new = [None] * len(a)
+    sizes = np.array([len(keeps[o]) if not full else -1 for o in owner])
+    for size in np.unique(sizes):
+        sel = np.flatnonzero(sizes == size)
+        n_struct = int(owner.max()) + 1
+
+        def ch(lv, sel=sel):
+            return _Batch([char(s, lv, full) if s in set(owner[sel].tolist()) else None for s in range(n_struct)], owner[sel])
+
+        v_in = None if vec is None or any(vec[i] is None for i in sel) else np.array([vec[i] for i in sel])
+        g_in = None if v_in is None else Gc[sel]
+        an, tn, okn, gn, vn = _step_level(ch, level, a[sel], t[sel], tau[sel], g_in, v_in)
+        a_new[sel], t_new[sel], ok[sel], Gc_new[sel] = an, tn, okn, gn
+        for k, i in enumerate(sel):
+            vec_new[i] = vn[k]
+    return a_new, t_new, ok, Gc_new, vec_new
+
+
+def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol, verify, seed_level, branch_families=True):
+    """From the converged seed-search points of every job: band candidates re-solved on the whole
+    structure, near ties (NEAR_TIE) brought to level 0, verified there (winding count, job by
+    job), refined in resolution until the error estimate is below rel_tol / 2, put back on the
+    full structure (irrelevant modes), chatter frequency. Newton steps batched over jobs."""
+    J = len(jobs)
+    repaired = np.zeros(J, bool)
+    verified = [None] * J
+    # near ties at the seed level (band searches: twice as wide), flattened
+    ej, ea, et, ev, eg = [], [], [], [], []
+    for j, (ca, ct, cv, cg) in enumerate(cands):
+        if len(ca):
+            projected = any(v is not None for v in cv)
+            near = np.flatnonzero(ca <= ca[0] * (1.0 + (2.0 if projected else 1.0) * NEAR_TIE))
+            ej += [j] * len(near)
+            ea += list(ca[near])
+            et += list(ct[near])
+            ev += [cv[i] for i in near]
+            eg += list(cg[near])
+    ej, ea, et = np.array(ej, int), np.array(ea, float), np.array(et, float)
+    owner = np.array([jobs[j][0] for j in ej], int)
+    etau = np.array([tau_all[jobs[j][1]] for j in ej], float)
+    Gc, vec = np.zeros(len(ej), complex), None
+    # candidates of band searches: re-solved on the whole structure, same level
+    lifted = np.flatnonzero([v is not None for v in ev])
+    if len(lifted):
+        for o in np.unique(owner[lifted]):
+            ii = lifted[owner[lifted] == o]
+            g_in = np.array([eg[i] for i in ii])
+            a_f, t_f, ok, g_f, v_f = _newton(char(int(o), seed_level), ea[ii], et[ii], etau[ii], tol=REFINE_TOL, vec=np.array([ev[i] for i in ii]),
+                                             Gc=g_in if np.all(np.isfinite(g_in)) else None)
+            ea[ii] = np.where(ok, a_f, np.inf)
+            et[ii] = np.where(t_f > np.pi, 2 * np.pi - t_f, t_f)
+            Gc[ii] = g_f
+            for q, i in enumerate(ii):
+                ev[i] = np.conj(v_f[q]) if t_f[q] > np.pi else v_f[q]
+        fine = np.isfinite(ea)
+        # near ties again, on the whole structure
+        for j in np.unique(ej):
+            mine = np.flatnonzero(ej == j)
+            if fine[mine].any():
+                fine[mine] &= ea[mine] <= ea[mine][fine[mine]].min() * (1.0 + NEAR_TIE)
+        sel = np.flatnonzero(fine)
+        order = sel[np.lexsort((ea[sel], ej[sel]))]
+        ej, ea, et, owner, etau, Gc = ej[order], ea[order], et[order], owner[order], etau[order], Gc[order]
+        ev = [ev[i] for i in order]
+        # duplicates (two bands converging on one point)
+        dup = np.zeros(len(ej), bool)
+        for k in range(1, len(ej)):
+            if ej[k] == ej[k - 1] and abs(ea[k] - ea[k - 1]) <= 1e-5 * ea[k] and abs(et[k] - et[k - 1]) <= 1e-4:
+                dup[k] = True
+        keep_ = np.flatnonzero(~dup)
+        ej, ea, et, owner, etau, Gc = ej[keep_], ea[keep_], et[keep_], owner[keep_], etau[keep_], Gc[keep_]
+        ev = [ev[i] for i in keep_]
+        if all(v is not None for v in ev):
+            vec = list(ev)
+    level = seed_level
+    while level < 0 and len(ej):
+        ea, et, _, Gc, vec = _batched_step(char, keeps, level, ea, et, etau, owner, Gc, vec)
+        level += 1
+    if verify:
+        add_j, add_a, add_t = [], [], []
+        for j, (s, e) in enumerate(jobs):
+            tau = tau_all[e]
+            c0 = char(s, 0, True)
+            mine = np.flatnonzero(ej == j)
+            top = ea[mine].min() if len(mine) else np.inf
+            if len(mine):
+                lam0 = c0.free_eig()[0]
+                count, resolved, _ = unstable_count(c0, VERIFY_FRACTION * top, tau, extra=np.concatenate([et[mine], lam0.imag * tau]))
+            else:
+                count, resolved = 1, True
+            if count > 0 or not resolved:
+                extra = _repair(c0, tau, top)
+                if extra is not None:
+                    repaired[j] = True
+                    add_j.append(j)
+                    add_a.append(extra[0])
+                    add_t.append(extra[1])
+                    count, resolved, _ = unstable_count(c0, VERIFY_FRACTION * extra[0], tau)
+            verified[j] = bool(count == 0 and resolved)
+        if add_j:
+            ej = np.concatenate([ej, add_j])
+            ea = np.concatenate([ea, add_a])
+            et = np.concatenate([et, add_t])
+            owner = np.array([jobs[j][0] for j in ej], int)
+            etau = np.array([tau_all[jobs[j][1]] for j in ej], float)
+            Gc = np.concatenate([Gc, np.zeros(len(add_j), complex)])
+            vec = None if vec is None else list(vec) + [None] * len(add_j)
+    # near ties at level 0
+    keep_el = np.ones(len(ej), bool)
+    for j in range(J):
+        mine = np.flatnonzero(ej == j)
+        if len(mine):
+            keep_el[mine] = ea[mine] <= ea[mine].min() * (1.0 + NEAR_TIE)
+    sel = np.flatnonzero(keep_el)
+    ej, ea, et, owner, etau, Gc = ej[sel], ea[sel], et[sel], owner[sel], etau[sel], Gc[sel]
+    vec = None if vec is None else [vec[i] for i in sel]
+    err = np.full(len(ej), np.inf)
+    conv_job = np.zeros(J, bool)
+    level_job = np.zeros(J, int)
+    active = np.ones(len(ej), bool)
+    while base * 2.0 ** (level + 1) <= MAX_SUBSTEPS_PER_RAD and active.any():
+        idx = np.flatnonzero(active)
+        v_in = None if vec is None else [vec[i] for i in idx]
+        an, tn, ok, gn, vn = _batched_step(char, keeps, level, ea[idx], et[idx], etau[idx], owner[idx], Gc[idx], v_in)
+        err[idx] = np.where(ok, np.abs(an - ea[idx]) / an, np.inf)
+        ea[idx], et[idx], Gc[idx] = an, tn, gn
+        if vec is None:
+            vec = [None] * len(ej)
+        for k, i in enumerate(idx):
+            vec[i] = vn[k]
+        level += 1
+        for j in np.unique(ej[idx]):
+            mine = np.flatnonzero(ej == j)
+            level_job[j] = level
+            b = mine[np.argmin(ea[mine])]
+            close = mine[ea[mine] <= ea[b] * (1 + rel_tol)]
+            if err[b] <= 0.5 * rel_tol and np.all(err[close] <= 0.5 * rel_tol):
+                conv_job[j] = True
+                active[mine] = False
+    # the irrelevant modes back in, same resolution
+    back = np.flatnonzero([len(keeps[o]) < dyns[o].n_modes for o in owner])
+    if len(back):
+        full_vec = []
+        for i in back:
+            o = owner[i]
+            N, kp = dyns[o].n_modes, keeps[o]
+            ns = len(kp)
+            v = np.zeros(2 * N, dtype=complex)
+            v[kp], v[N + kp] = vec[i][:ns], vec[i][ns:]
+            full_vec.append(v)
+        ob, lb = owner[back], level_job[ej[back]]
+        for lv in np.unique(lb):
+            sb = np.flatnonzero(lb == lv)
+            ii = back[sb]
+            n_struct = int(owner.max()) + 1
+            batch = _Batch([char(s, int(lv), True) if s in set(ob[sb].tolist()) else None for s in range(n_struct)], ob[sb])
+            a_f, t_f, ok, _, _ = _newton(batch, ea[ii], et[ii], etau[ii], tol=REFINE_TOL, Gc=Gc[ii], vec=np.array([full_vec[k] for k in sb]))
+            ea[ii] = np.where(ok, a_f, ea[ii])
+            et[ii] = np.where(ok, np.where(t_f > np.pi, 2 * np.pi - t_f, t_f), et[ii])
+    points = []
+    for j, (s, e) in enumerate(jobs):
+        mine = np.flatnonzero(ej == j)
+        r = float(rpm[e])
+        if not len(mine):
+            points.append(CriticalPoint(r, np.inf, np.nan, np.nan, (), base, np.nan, False, verified[j], ()))
+            continue
+        lv = level_job[j]
+        ch = char(s, lv, True)
+        tau = tau_all[e]
+        branches = []
+        for rank, i in enumerate(mine[np.argsort(ea[mine])]):
+            if rank and not branch_families:  # lobes: the lowest branch's frequency only
+                hz, family = np.nan, ()
+            else:
+                hz, family = floquet_family(ch, ea[i], et[i], tau)
+            branches.append((float(ea[i]), hz, float(et[i]), family, float(err[i])))
+        a, hz, th, family, er = branches[0]
+        points.append(CriticalPoint(r, a, hz, th, family, base * 2.0**lv, er, bool(conv_job[j] and er <= rel_tol), verified[j],
+                                    tuple((b[0], b[1], b[2]) for b in branches), bool(repaired[j])))
+    return points
+
+
+def _dedupe(a, t, rel: float = 1e-5, index: bool = False):
+    """Distinct boundary points (theta folded to [0, pi]), sorted by depth (or their indices)."""
+    t = np.where(t > np.pi, 2.0 * np.pi - t, t)
+    order = np.argsort(a)
+    out_a, out_t, out_i = [], [], []
+    for i in order:
+        if any(abs(a[i] - x) <= rel * x and abs(t[i] - y) <= 1e-4 for x, y in zip(out_a, out_t)):
+            continue
+        out_a.append(a[i])
+        out_t.append(t[i])
+        out_i.append(i)
+    if index:
+        return np.array(out_i, int)
+    return np.array(out_a), np.array(out_t)
+
+
+def _step_level(char, level, a_prev, t_prev, tau, Gc, vec):
+    """Newton at level + 1 from the boundary points of `level`: (a, theta folded to [0, pi],
+    converged, Gc, vec)."""
+    taus = np.full(len(a_prev), tau)
+    if vec is None:
+        _, vec = _critical_log(char(level), a_prev, t_prev, taus)
+    a_new, t_new, ok, Gc, vec = _newton(char(level + 1), a_prev, t_prev, taus, tol=REFINE_TOL, Gc=Gc, vec=vec)
+    a_new = np.where(ok, a_new, a_prev)
+    vec = np.where((t_new > np.pi)[:, None], np.conj(vec), vec)
+    t_new = np.where(ok, np.where(t_new > np.pi, 2 * np.pi - t_new, t_new), t_prev)
+    return a_new, t_new, ok, Gc, vec
+
+
+def _repair(char, tau, a_top):
+    """A boundary point below a_top missed by the seeds: bisection in depth on the winding count,
+    then Newton from the theta where the multiplier is nearest the unit circle."""
+    lo, hi = 0.0, a_top if np.isfinite(a_top) else None
+    if hi is None:
+        a = 1e-4
+        for _ in range(30):
+            if unstable_count(char, a, tau)[0] > 0:
+                hi = a
+                break
+            lo, a = a, a * 2.0
+        if hi is None:
+            return None
+    lo = max(lo, hi * 1e-3)
+    if unstable_count(char, lo, tau)[0] > 0:
+        lo = 0.0
+    hi *= VERIFY_FRACTION
+    while hi - lo > 0.01 * hi:
+        mid = 0.5 * (lo + hi) if lo == 0.0 else np.sqrt(lo * hi)
+        if unstable_count(char, mid, tau)[0] > 0:
+            hi = mid
+        else:
+            lo = mid
+    th = np.linspace(0.0, np.pi, 721)
+    nu = np.exp(-1j * th)
+    sig = np.linalg.eigvals(char.monodromy(hi * (1.0 - nu), np.full(len(th), tau))) * nu[:, None]
+    dist = np.abs(np.log(sig)).min(axis=1)
+    k = int(np.argmin(dist))
+    a_r, t_r, ok, _, _ = _newton(char, np.array([hi]), np.array([th[k]]), np.array([tau]))
+    if not ok[0]:
+        return None
+    return float(a_r[0]), float(min(t_r[0], 2 * np.pi - t_r[0]))

@@ -1,0 +1,107 @@
+"""Every command's `--json` on the smallest inputs it accepts prints valid JSON (no NaN or
+Infinity: undefined values are null, with a note where they are not obvious), and the one
+defaults rule (issue 19): the cut from --cut or the model directory, else a clear error."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / "datasets"
+SEED004 = DATA / "seeds/hou2023_positions.csv"
+CUT = DATA / "seeds/hou2023_cut.toml"
+CUT_FLAGS = ["--teeth", "3", "--kt-mpa", "796", "--kn-mpa", "169", "--radial-immersion", "0.5"]
+
+
+def strict_json(text: str):
+    def refuse(constant):
+        raise ValueError(f"{constant} is not JSON")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def run(*args):
+    return subprocess.run([sys.executable, "-m", "posedyn", *map(str, args)], capture_output=True, text=True, cwd=ROOT, timeout=600)
+
+
+def json_of(*args):
+    done = run(*args, "--json")
+    assert done.returncode == 0, done.stderr
+    return strict_json(done.stdout)
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    """Seed 004's positions 1, 4 and 7 (the smallest table `train --cv 3` accepts), a model of
+    them that carries the seed's cut, and one pose."""
+    folder = tmp_path_factory.mktemp("small")
+    lines = SEED004.read_text().splitlines()
+    keep = [lines[0]] + [l for l in lines[1:] if l.split(",")[0] in ("P1", "P4", "P7")]
+    (folder / "three.csv").write_text("\n".join(keep) + "\n")
+    (folder / "pose.csv").write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nP4,1500,0,800,0\n")
+    return folder
+
+
+def test_train_with_one_pose_folds_is_valid_json_and_says_why_r2_is_null(small):
+    out = json_of("train", small / "three.csv", "--cv", "3", "--cut", CUT, "--out", small / "model")
+    entry = out["cv"]["x1.fn_hz"]
+    assert entry["r2_mean"] is None and entry["r2_std"] is None and "fewer than two poses" in entry["note"]
+    assert entry["r2_pooled"] is not None and math.isfinite(entry["rmse"])
+    assert (small / "model" / "cut.toml").read_text() == CUT.read_text()
+
+
+def test_every_command_prints_strict_json_on_small_inputs(small, tmp_path):
+    if not (small / "model").exists():
+        json_of("train", small / "three.csv", "--cv", "0", "--cut", CUT, "--out", small / "model")
+    json_of("data", "check", small / "three.csv")
+    json_of("predict", small / "model", "--poses", small / "pose.csv")
+    json_of("absorber", "field", "--target-hz", "20")
+    json_of("absorber", "tune", "--host-fn-hz", "20", "--host-k-n-per-m", "5e5", "--host-zeta", "0.03", "--mass-ratio", "0.05", "--layout", "tmd", *CUT_FLAGS)
+    entries = json_of("schedule", small / "model", "--poses", small / "pose.csv")  # the model's cut
+    assert entries[0]["stability"]["converged"] is True
+    json_of("control", "schedule", "--modes", small / "three.csv", "--poses", small / "pose.csv")
+    json_of("chatter", "--modes", small / "three.csv", "--pose-id", "P4", "--rpm", "2000", *CUT_FLAGS)
+    json_of("lobes", "--modes", small / "three.csv", "--pose-id", "P4", "--rpm-min", "1900", "--rpm-max", "2100", "--rpm-steps", "2", *CUT_FLAGS)
+    json_of("sle", "--modes", small / "three.csv", "--pose-id", "P4", "--direction", "y", "--rpm", "2000", "--teeth", "3", "--kt-mpa", "796", "--kn-mpa", "169",
+            "--tool-diameter-mm", "6", "--helix-deg", "30", "--radial-depth-mm", "3", "--axial-depth-mm", "0.2", "--feed-per-tooth-mm", "0.05", "--milling", "down")
+    json_of("twin", "modes", "--x-mm", "1600", "--y-mm", "0", "--z-mm", "600", "--beta-deg", "0")
+    grid = tmp_path / "grid.toml"
+    grid.write_text('[meta]\nkind = "pose_grid"\nsource = "test"\n\n[[poses]]\nx_mm = 1600\ny_mm = 0\nz_mm = 600\nbeta_deg = 0\n')
+    json_of("twin", "campaign", "--grid", grid, "--out", tmp_path / "campaign.csv")
+    json_of("sweep", "--twin", DATA / "robots/kr_r2700_twin.toml", "--grid", grid, "--cut", DATA / "cuts/sweep_demo_cut.toml", "--out", tmp_path / "sweep", "--workers", "1", "--no-lobes")
+    made = run("gap-campaign", "--cut", CUT, "--out", tmp_path / "meas.csv", "--poses", "2")
+    assert made.returncode == 0, made.stderr
+    json_of("gap", "--measured", tmp_path / "meas.csv", "--twin", "--cut", CUT, "--out", tmp_path / "gap")
+
+
+def test_a_command_without_a_cut_names_both_ways_to_give_one(small, tmp_path):
+    done = run("sweep", "--twin", DATA / "robots/kr_r2700_twin.toml", "--grid", DATA / "campaigns/seed003_grid.toml", "--out", tmp_path / "o")
+    assert done.returncode == 2 and "--cut" in done.stderr and "cut.toml" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_the_gap_baseline_honours_a_b_c_orientations():
+    """A campaign that gives its poses as A/B/C is predicted at those orientations: the same
+    fn as the equivalent beta pose, not the beta = 0 one (issue 19: it used to read beta only)."""
+    from posedyn.gap import Measurements
+    from posedyn.robot import abc_from_rotation, rotation_from_beta
+    from service.gap.baseline import Baseline
+
+    a, b, c = np.degrees(abc_from_rotation(rotation_from_beta(math.radians(50.0))))
+
+    def campaign(orientation):
+        conditions = {"x_mm": np.array([1600.0]), "y_mm": np.array([100.0]), "z_mm": np.array([600.0]), **{k: np.array([v]) for k, v in orientation.items()}}
+        return Measurements(quantity=np.array(["fn_hz"]), value=np.ones(1), std=np.ones(1), pose_id=np.array(["p"]), direction=np.array(["x"]), mode=np.array([1.0]), conditions=conditions)
+
+    baseline = Baseline(twin_file=DATA / "robots/kr_r2700_twin.toml")
+    fn_abc = baseline.predict(campaign({"a_deg": a, "b_deg": b, "c_deg": c}))[0][0]
+    fn_beta = baseline.predict(campaign({"beta_deg": 50.0}))[0][0]
+    fn_zero = baseline.predict(campaign({"beta_deg": 0.0}))[0][0]
+    assert fn_abc == pytest.approx(fn_beta, rel=1e-9)
+    assert abs(fn_abc / fn_zero - 1) > 1e-3

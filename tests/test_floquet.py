@@ -1,0 +1,106 @@
+"""Issue 17: the exact Floquet characteristic (posedyn.stability.floquet) against an
+independent time-domain simulation (/work/indep17, bracket of the critical depth), a refined
+semi-discretization, and seed 004."""
+
+import math
+
+import numpy as np
+import pytest
+
+from posedyn.dynamics import ToolTipDynamics
+from posedyn.io import read_modal_table
+from posedyn.stability import Cut, Discretization, StabilityModel
+from posedyn.stability import floquet as converged
+from posedyn.table import Mode
+
+TABLE = [
+    ("x", 12.5909, 0.0300342, 2.11684e06), ("x", 13.1342, 0.0305178, 9.91928e09),
+    ("x", 1443.92, 0.068509, 3.37558e07), ("x", 5438.87, 0.0109756, 2.89553e07),
+    ("y", 12.6066, 0.0298721, 1.70046e07), ("y", 13.1265, 0.030316, 910188.0),
+    ("y", 1479.59, 0.048235, 6.7942e07), ("y", 5418.99, 0.0109107, 2.75146e07),
+]
+ROBOT = ToolTipDynamics.from_modes(
+    x=[Mode(f, z, k) for d, f, z, k in TABLE if d == "x"], y=[Mode(f, z, k) for d, f, z, k in TABLE if d == "y"]
+)
+CUT = Cut(teeth=3, kt_pa=796e6, kn_pa=169e6, radial_immersion=0.5, milling="down")
+
+FN, ZETA, MASS = 922.0, 0.011, 0.03993
+ONE_DOF = ToolTipDynamics.from_modes(x=[Mode(FN, ZETA, MASS * (2 * math.pi * FN) ** 2)])
+
+# independent time-domain simulation: (rpm, stable depth mm, unstable depth mm, growing Hz)
+SIMULATION = [(1000.0, 1.8621, 1.8737, 5437.4), (2000.0, 1.5115, 1.5228, 5456.9), (5000.0, 1.2880, 1.2937, 5421.7), (12000.0, 4.6067, 4.6454, 5553.3)]
+
+
+@pytest.mark.parametrize("rpm, lo, hi, hz", SIMULATION)
+def test_issue17_table_inside_two_percent_of_the_time_domain_bracket(rpm, lo, hi, hz):
+    r = converged.critical_depth(ROBOT, CUT, rpm, verify=rpm == 1000.0)
+    assert r.converged and r.rel_error_estimate <= 0.02
+    assert 0.98 * lo <= r.depth_m * 1e3 <= 1.02 * hi
+    # the simulation's growing line is a member of the Floquet family
+    assert min(abs(f - hz) for f, _ in r.family) <= 5.0
+    if rpm == 1000.0:  # the spindle branch, not the robot one (the prototype's miss)
+        assert r.verified and r.chatter_hz == pytest.approx(5437.0, abs=5.0)
+
+
+def test_2000_rpm_low_lines_are_aliases_of_the_spindle_branch():
+    """The simulation's 1357 / 1457 Hz lines are 5456.7 Hz - 41 / 40 x 100 Hz (tooth frequency):
+    members of the same Floquet family, not a second branch."""
+    r = converged.critical_depth(ROBOT, CUT, 2000.0, verify=False)
+    assert r.chatter_hz == pytest.approx(5456.7, abs=2.0)
+    for line in (1356.9, 1456.9):
+        j = (r.chatter_hz - line) / 100.0
+        assert abs(j - round(j)) < 0.01
+
+
+@pytest.mark.parametrize("immersion, rpm", [(1.0, 7500.0), (0.05, 8400.0), (0.5, 6300.0)])
+def test_single_mode_benchmark_agrees_with_refined_sdm(immersion, rpm):
+    cut = Cut(teeth=2, kt_pa=6e8, kn_pa=2e8, radial_immersion=immersion, milling="down")
+    fine = StabilityModel(ONE_DOF, cut, Discretization(steps=160, order=1), workers=1).critical_depths([rpm], rel_tol=1e-5)
+    r = converged.critical_depth(ONE_DOF, cut, rpm)
+    assert r.verified
+    assert r.depth_m == pytest.approx(fine.depth_m[0], rel=0.02)
+    assert r.chatter_hz == pytest.approx(fine.dominant_chatter_hz[0], rel=0.01, abs=1.0)
+
+
+def test_seed004_position5(datasets):
+    table = read_modal_table(datasets / "seeds/hou2023_positions.csv")
+    dyn = ToolTipDynamics.from_table(table, "P5")
+    fine = StabilityModel(dyn, CUT, Discretization(steps=80), workers=1).critical_depths([2000.0], rel_tol=1e-4)
+    r = converged.critical_depth(dyn, CUT, 2000.0)
+    assert r.verified
+    assert r.depth_m == pytest.approx(fine.depth_m[0], rel=0.02)
+    assert r.depth_m * 1e3 == pytest.approx(0.891, rel=0.02)
+    assert 19.0625 < r.chatter_hz < 1.15 * 19.0625
+
+
+def test_batched_api_matches_single_calls():
+    rs = converged.critical_depths([ROBOT, ONE_DOF, ROBOT], CUT, [5000.0, 5000.0, 12000.0])
+    for dyn, rpm, r in zip([ROBOT, ONE_DOF, ROBOT], [5000.0, 5000.0, 12000.0], rs):
+        single = converged.critical_depth(dyn, CUT, rpm, verify=False)
+        assert r.depth_m == pytest.approx(single.depth_m, rel=1e-6)
+
+
+def _with_absorber(dyn):
+    from absorber.coupling import with_absorber
+
+    return with_absorber(dyn, 3.0, 3.0 * (2 * math.pi * 13.0) ** 2, 0.1)
+
+
+def test_eigen_frf_matches_the_structure_frf():
+    for dyn in (ROBOT, _with_absorber(ROBOT)):
+        char = converged.FloquetCharacteristic(dyn, CUT, 4.0)
+        w = np.linspace(10.0, 40000.0, 301)
+        ref = dyn.rotated(np.deg2rad(CUT.feed_angle_deg)).frf(w)
+        assert np.abs(char.frf(w) - ref).max() <= 1e-10 * np.abs(ref).max()
+
+
+@pytest.mark.parametrize("coupled, rpm", [(False, 1000.0), (False, 12000.0), (True, 5000.0)])
+def test_band_seed_search_matches_the_whole_structure_search(monkeypatch, coupled, rpm):
+    """The band projections only choose Newton's starting points: every candidate is re-solved
+    on the whole structure, so the result equals the whole-structure search."""
+    dyn = _with_absorber(ROBOT) if coupled else ROBOT
+    fast = converged.critical_depth(dyn, CUT, rpm, verify=False)
+    monkeypatch.setattr(converged, "PROJECT_SEEDS", False)
+    whole = converged.critical_depth(dyn, CUT, rpm, verify=False)
+    assert fast.depth_m == pytest.approx(whole.depth_m, rel=1e-6)
+    assert fast.chatter_hz == pytest.approx(whole.chatter_hz, abs=0.1)

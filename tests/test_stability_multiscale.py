@@ -1,0 +1,68 @@
+"""Stability of a robot-plus-spindle structure (issue 17): 12-13 Hz robot modes with 1.4 kHz and
+5.4 kHz spindle modes at low spindle speed, where 20-320 semi-discretization steps gave answers
+2.7x apart. The converged engine is checked against things that share no code with it: an
+independent time-domain simulation (tests/independent_milling_sim.py, written from the physics
+by a session that never read the engine) and the refined semi-discretization."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+import independent_milling_sim as sim
+from posedyn.dynamics import ToolTipDynamics
+from posedyn.stability import Cut, Discretization, StabilityModel, critical_points
+from posedyn.table import Mode
+
+#: The demo sweep's model at pose x1700_y-100_z600_b40 (issue 17): direction, fn_hz, zeta, k_n_per_m.
+TABLE = [
+    ("x", 12.5909, 0.0300342, 2.11684e06),
+    ("x", 13.1342, 0.0305178, 9.91928e09),
+    ("x", 1443.92, 0.068509, 3.37558e07),
+    ("x", 5438.87, 0.0109756, 2.89553e07),
+    ("y", 12.6066, 0.0298721, 1.70046e07),
+    ("y", 13.1265, 0.030316, 910188.0),
+    ("y", 1479.59, 0.048235, 6.7942e07),
+    ("y", 5418.99, 0.0109107, 2.75146e07),
+]
+CUT = Cut(teeth=3, kt_pa=796e6, kn_pa=169e6, radial_immersion=0.5, milling="down")
+
+
+def structure(rows) -> ToolTipDynamics:
+    return ToolTipDynamics.from_modes(x=[Mode(f, z, k) for d, f, z, k in rows if d == "x"], y=[Mode(f, z, k) for d, f, z, k in rows if d == "y"])
+
+
+def test_reported_depth_splits_growth_from_decay_in_an_independent_time_domain_simulation():
+    """5 % below the reported critical depth the independent simulation decays, 5 % above it
+    grows (time step resolving the 5.4 kHz mode with 40 steps a period, 3 s of cutting)."""
+    result = critical_points([structure(TABLE)], CUT, 2000.0)[0]
+    assert result.method == "floquet" and result.converged and result.rel_error_estimate < 0.02
+    assert 5400 < result.chatter_hz < 5500  # near the spindle mode that chatters
+    args = (TABLE, CUT.teeth, CUT.kt_pa, CUT.kn_pa, CUT.radial_immersion, CUT.milling, 2000.0)
+    assert not sim.grows(*args, 0.95 * result.depth_m)
+    assert sim.grows(*args, 1.05 * result.depth_m)
+
+
+@pytest.mark.parametrize("rpm, depth_mm", [(1000.0, 1.868), (2000.0, 1.517), (5000.0, 1.291), (12000.0, 4.626)])
+def test_depth_matches_the_independent_simulation_at_four_speeds(rpm, depth_mm):
+    """The independent simulation's critical depths (bisected to under 1 %; README table)."""
+    result = critical_points([structure(TABLE)], CUT, rpm)[0]
+    assert result.converged
+    assert result.depth_m * 1e3 == pytest.approx(depth_mm, rel=0.02)
+
+
+def test_two_methods_agree_on_the_spindle_modes():
+    """The refined first-order semi-discretization (320 steps, 5000 rpm, the spindle modes
+    alone so that it stays affordable) agrees with the engine to 1 %."""
+    spindle = structure([r for r in TABLE if r[1] > 1000])
+    engine = critical_points([spindle], CUT, 5000.0)[0]
+    sdm = StabilityModel(spindle, CUT, Discretization(320, order=1)).critical_depths([5000.0], rel_tol=1e-4)
+    assert engine.depth_m == pytest.approx(float(sdm.depth_m[0]), rel=0.01)
+    assert engine.chatter_hz == pytest.approx(float(sdm.dominant_chatter_hz[0]), rel=1e-3)
+
+
+def test_the_override_says_it_is_not_estimated():
+    result = critical_points([structure(TABLE)], CUT, 2000.0, steps=40)[0]
+    assert result.method == "sdm" and result.converged is None and math.isnan(result.rel_error_estimate)
+    assert result.accuracy_json() == {"method": "sdm", "converged": None, "rel_error_estimate": None, "steps": 40}
