@@ -61,6 +61,14 @@ def test_every_command_prints_strict_json_on_small_inputs(small, tmp_path):
     if not (small / "model").exists():
         json_of("train", small / "three.csv", "--cv", "0", "--cut", CUT, "--out", small / "model")
     json_of("data", "check", small / "three.csv")
+    (tmp_path / "tables").mkdir()
+    (tmp_path / "tables" / "three.csv").write_text((small / "three.csv").read_text())
+    json_of("data", "summary", tmp_path / "tables")
+    f = np.linspace(5.0, 60.0, 400)  # one mode, 20 Hz, zeta 0.03, k 1e6 N/m: the smallest FRF fit accepts
+    h = 1.0 / (1e6 * (1 - (f / 20.0) ** 2 + 2j * 0.03 * f / 20.0))
+    frf = tmp_path / "frf.csv"
+    frf.write_text("# pose_id = P1\n# x_mm = 1500\n# y_mm = 0\n# z_mm = 800\n# beta_deg = 0\nfrequency_hz,h_xx_re,h_xx_im\n" + "".join(f"{float(a)!r},{float(b.real)!r},{float(b.imag)!r}\n" for a, b in zip(f, h)))
+    json_of("fit", frf, "--out", tmp_path / "fitted.csv")
     json_of("predict", small / "model", "--poses", small / "pose.csv")
     json_of("absorber", "field", "--target-hz", "20")
     json_of("absorber", "tune", "--host-fn-hz", "20", "--host-k-n-per-m", "5e5", "--host-zeta", "0.03", "--mass-ratio", "0.05", "--layout", "tmd", *CUT_FLAGS)
