@@ -12,6 +12,7 @@ from rich.markup import escape
 from posedyn.errors import InputError
 from posedyn.gap import LIBRARY, analyse
 from posedyn.io.atomic import write_text_atomic
+from posedyn.io.json_values import json_ready
 from posedyn.io.measurements import format_measurements, read_measurements
 from posedyn.io.shipped import SHIPPED_TWIN
 from service.cli.common import console, resolve_cut
@@ -34,16 +35,16 @@ def gap(
         raise InputError("either --model MODEL_DIR or --twin", column="--model")
     m = read_measurements(measured)
     if cut is None and model is not None and (model / "cut.toml").exists():
-        cut = resolve_cut(cut, model)
+        cut = resolve_cut(cut, model)  # the model's cut; without one, only critical_depth_mm rows need --cut
     baseline = Baseline(twin_file=None if model else twin_file, model_dir=model, cut_file=cut, absorber_file=absorber)
     y, m = baseline.predict(m)
     result = analyse(m, y)
-    doc = result.to_json()
+    doc = json_ready(result.to_json())
     out.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(out / "gap.json", json.dumps(doc, indent=2) + "\n")
+    write_text_atomic(out / "gap.json", json.dumps(doc, indent=2, allow_nan=False) + "\n")
     write_text_atomic(out / "report.html", render(m, y, result, f"Simulation vs measurement: {measured.name}"))
     if as_json:
-        print(json.dumps(doc, indent=2))
+        print(json.dumps(doc, indent=2, allow_nan=False))
         return
     console.print(f"RMS normalised residual {result.rmse_before:.3g} -> {result.rmse_after:.3g} (noise 1); chi-square p {result.noise_p_before:.2g} -> {result.noise_p_after:.2g}")
     for e in doc["effects"]:
