@@ -66,3 +66,19 @@ def test_the_override_says_it_is_not_estimated():
     result = critical_points([structure(TABLE)], CUT, 2000.0, steps=40)[0]
     assert result.method == "sdm" and result.converged is None and math.isnan(result.rel_error_estimate)
     assert result.accuracy_json() == {"method": "sdm", "converged": None, "rel_error_estimate": None, "steps": 40}
+
+
+@pytest.mark.xfail(strict=True, reason="issue 17 open: a lower boundary point the engine and its multiplier count miss")
+def test_known_silent_miss_one_tooth_up_milling():
+    """Found by the ranges exploration against the independent simulation (which decays at
+    31.21 mm and grows at 31.98 mm, about 4684 Hz): the engine reports 52.0 mm, converged and
+    verified. Strict: fixing the engine turns this into a failure to remove the mark."""
+    rows = [
+        ("x", 3.4788947345062953, 0.0665111789662021, 4389275.395004164), ("x", 4.942389127913247, 0.07792997304811475, 1551067.1857480425),
+        ("x", 18.37641300745519, 0.07868331259563725, 23707258.912512306), ("x", 4660.743644571466, 0.04090254710066207, 16216180.755774021),
+        ("y", 9.632992532060534, 0.06834971398299657, 787684.7738570252), ("y", 492.1117798305512, 0.01333149807476733, 41415051.34515686),
+        ("y", 1168.5837714133852, 0.01159082619221039, 23427973.381064713),
+    ]
+    cut = Cut(teeth=1, kt_pa=974911890.7116745, kn_pa=436322561.1387025, radial_immersion=0.16599317940707128, milling="up")
+    result = critical_points([structure(rows)], cut, 13540.495847689088)[0]
+    assert result.depth_m < 0.03198 or not result.converged
