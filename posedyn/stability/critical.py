@@ -24,6 +24,8 @@ from posedyn.stability.model import Discretization
 
 #: Relative accuracy every default result reaches (or says it did not).
 REL_TOL = 0.02
+#: Sub-steps per radian from which the missed-branch check is repeated at the finer resolution.
+HARD_RESOLUTION = 4.0 * floquet.SUBSTEPS_PER_RAD
 #: Relative bisection tolerance of the semi-discretization override.
 SDM_REL_TOL = 2e-3
 
@@ -59,8 +61,24 @@ def critical_points(structures: list[ToolTipDynamics], cut: Cut, rpm, steps: int
     if not structures:
         return []
     if steps is None:
-        return [_converged_or_flagged(p, frequencies) for p in _floquet_points(structures, cut, rpm, verify)]
+        points = _floquet_points(structures, cut, rpm, verify)
+        if verify:
+            points = [_verified_at_resolution(p, dyn, cut, r) for p, dyn, r in zip(points, structures, rpm)]
+        return [_converged_or_flagged(p, frequencies) for p in points]
     return _sdm_points(structures, cut, rpm, steps, frequencies)
+
+
+def _verified_at_resolution(point, dyn, cut, rpm):
+    """The engine checks for a missed lower branch at its coarsest resolution. Where the answer
+    needed HARD_RESOLUTION or finer (sharp force changes: one tooth, low immersion), the coarse
+    cut model can lack that branch altogether, so the point is solved again with the check made
+    at half the resolution it needed; a failed check then flags it (`verified` False)."""
+    if point is None or not math.isfinite(point.depth_m) or point.substeps_per_rad < HARD_RESOLUTION:
+        return point
+    try:
+        return floquet.critical_depth(dyn, cut, float(rpm), rel_tol=REL_TOL, substeps_per_rad=point.substeps_per_rad / 2.0, verify=True)
+    except (np.linalg.LinAlgError, FloatingPointError, ValueError, ZeroDivisionError):
+        return None
 
 
 def _floquet_points(structures, cut, rpm, verify):
@@ -77,7 +95,8 @@ def _floquet_points(structures, cut, rpm, verify):
 def _converged_or_flagged(point, frequencies: bool) -> StabilityResult:
     if point is None:
         return StabilityResult(math.nan, math.nan, "floquet", False, math.inf)  # unknown, not "never chatters"
-    return StabilityResult(point.depth_m, point.chatter_hz if frequencies else math.nan, "floquet", bool(point.converged), float(point.rel_error_estimate), family=tuple(point.family))
+    converged = bool(point.converged) and point.verified is not False  # a failed check is not a converged answer
+    return StabilityResult(point.depth_m, point.chatter_hz if frequencies else math.nan, "floquet", converged, float(point.rel_error_estimate), family=tuple(point.family))
 
 
 def _sdm_points(structures, cut, rpm, steps, frequencies) -> list[StabilityResult]:
