@@ -68,7 +68,7 @@ def test_position5_absorber_suppresses_chatter_in_the_time_domain(position5, cap
 
 
 def posedyn(*args):
-    return subprocess.run([sys.executable, "-m", "posedyn", *map(str, args)], capture_output=True, text=True)
+    return subprocess.run([sys.executable, "-m", "service", *map(str, args)], capture_output=True, text=True)
 
 
 def test_absorber_cli_contracts():

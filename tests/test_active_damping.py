@@ -90,7 +90,7 @@ def test_control_schedule_cli(datasets, tmp_path):
     poses = tmp_path / "p.csv"
     poses.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nP5,1400,0,800,0\n")
     result = subprocess.run(
-        [sys.executable, "-m", "posedyn", "control", "schedule", "--modes", datasets / "seeds/hou2023_positions.csv", "--poses", poses,
+        [sys.executable, "-m", "service", "control", "schedule", "--modes", datasets / "seeds/hou2023_positions.csv", "--poses", poses,
          "--actuator", datasets / "seeds/sahu2024_active_damping.toml", "--json"],
         capture_output=True, text=True,
     )

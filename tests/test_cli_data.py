@@ -6,7 +6,7 @@ import sys
 
 
 def posedyn(*args):
-    return subprocess.run([sys.executable, "-m", "posedyn", *map(str, args)], capture_output=True, text=True)
+    return subprocess.run([sys.executable, "-m", "service", *map(str, args)], capture_output=True, text=True)
 
 
 def test_data_check_json_on_a_valid_file(datasets):

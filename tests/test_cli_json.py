@@ -28,7 +28,7 @@ def strict_json(text: str):
 
 
 def run(*args):
-    return subprocess.run([sys.executable, "-m", "posedyn", *map(str, args)], capture_output=True, text=True, cwd=ROOT, timeout=600)
+    return subprocess.run([sys.executable, "-m", "service", *map(str, args)], capture_output=True, text=True, cwd=ROOT, timeout=600)
 
 
 def json_of(*args):

@@ -10,7 +10,7 @@ CUT = ["--teeth", "3", "--kt-mpa", "796", "--kn-mpa", "169", "--radial-immersion
 
 
 def posedyn(*args):
-    return subprocess.run([sys.executable, "-m", "posedyn", *map(str, args)], capture_output=True, text=True)
+    return subprocess.run([sys.executable, "-m", "service", *map(str, args)], capture_output=True, text=True)
 
 
 def test_chatter_json_contract(datasets):

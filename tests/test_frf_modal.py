@@ -77,7 +77,7 @@ def test_fit_cli_writes_a_coupled_table_that_the_stability_engine_uses(tmp_path)
     modes, clean, H = coupled_matrix(f, rng)
     frf = FRFSet(f, H, pose_id="C1", pose={"x_mm": 1500.0, "y_mm": 0.0, "z_mm": 600.0, "beta_deg": 10.0})
     write_frf_csv(frf, tmp_path / "c1.csv")
-    result = subprocess.run([sys.executable, "-m", "posedyn", "fit", tmp_path / "c1.csv", "--out", tmp_path / "modes.csv", "--modes", "2", "--plot", tmp_path / "plots", "--json"], capture_output=True, text=True)
+    result = subprocess.run([sys.executable, "-m", "service", "fit", tmp_path / "c1.csv", "--out", tmp_path / "modes.csv", "--modes", "2", "--plot", tmp_path / "plots", "--json"], capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout)["coupled"] is True
     assert (tmp_path / "plots/C1.png").read_bytes()[:4] == b"\x89PNG"

@@ -220,7 +220,7 @@ def test_physics_falls_back_without_reachable_poses(twin, datasets):
 
 
 def posedyn(*args):
-    return subprocess.run([sys.executable, "-m", "posedyn", *map(str, args)], capture_output=True, text=True)
+    return subprocess.run([sys.executable, "-m", "service", *map(str, args)], capture_output=True, text=True)
 
 
 def test_train_and_predict_cli_contract(datasets, tmp_path):

@@ -209,7 +209,7 @@ def test_shipped_campaign_matches_its_recorded_recipe(datasets, tmp_path):
     """datasets/campaigns/seed003_twin_s1.csv is `posedyn twin campaign --grid seed003_grid.toml --seed 1`."""
     out = tmp_path / "again.csv"
     result = subprocess.run(
-        [sys.executable, "-m", "posedyn", "twin", "campaign", "--grid", datasets / "campaigns/seed003_grid.toml", "--seed", "1", "--out", out, "--json"],
+        [sys.executable, "-m", "service", "twin", "campaign", "--grid", datasets / "campaigns/seed003_grid.toml", "--seed", "1", "--out", out, "--json"],
         capture_output=True, text=True,
     )
     assert result.returncode == 0, result.stderr
@@ -224,7 +224,7 @@ def test_shipped_campaign_matches_its_recorded_recipe(datasets, tmp_path):
 
 def test_twin_modes_cli_and_bad_grid(datasets, tmp_path):
     result = subprocess.run(
-        [sys.executable, "-m", "posedyn", "twin", "modes", "--x-mm", "1500", "--y-mm", "100", "--z-mm", "600", "--beta-deg", "20", "--json"],
+        [sys.executable, "-m", "service", "twin", "modes", "--x-mm", "1500", "--y-mm", "100", "--z-mm", "600", "--beta-deg", "20", "--json"],
         capture_output=True, text=True,
     )
     assert result.returncode == 0, result.stderr
@@ -232,6 +232,6 @@ def test_twin_modes_cli_and_bad_grid(datasets, tmp_path):
     assert len(out["modes"]) == 6 and 5 < out["modes"][0]["fn_hz"] < 40
     bad = tmp_path / "grid.toml"
     bad.write_text('[meta]\nkind = "pose_grid"\nsource = "test"\n[grid]\nx_mm = [1500]\ny_mm = [0]\nz_mm = ["high"]\nbeta_deg = [0]\n')
-    result = subprocess.run([sys.executable, "-m", "posedyn", "twin", "campaign", "--grid", bad, "--out", tmp_path / "o.csv"], capture_output=True, text=True)
+    result = subprocess.run([sys.executable, "-m", "service", "twin", "campaign", "--grid", bad, "--out", tmp_path / "o.csv"], capture_output=True, text=True)
     assert result.returncode == 2 and "z_mm" in result.stderr and "grid.toml" in result.stderr and "Traceback" not in result.stderr
     assert not (tmp_path / "o.csv").exists()

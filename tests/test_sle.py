@@ -86,7 +86,7 @@ def test_sle_cli_contract(datasets):
             "--tool-diameter-mm", 12.7, "--helix-deg", 40, "--radial-depth-mm", 2, "--axial-depth-mm", 2.5, "--feed-per-tooth-mm", 0.25, "--milling", "down"]
 
     def run(*extra):
-        result = subprocess.run([sys.executable, "-m", "posedyn", "sle", *map(str, extra), *map(str, args), "--json"], capture_output=True, text=True)
+        result = subprocess.run([sys.executable, "-m", "service", "sle", *map(str, extra), *map(str, args), "--json"], capture_output=True, text=True)
         assert result.returncode == 0, result.stderr
         return json.loads(result.stdout)
 

@@ -1,4 +1,4 @@
-"""The `posedyn` command line, the one CLI of the project (`posedyn ...` and `python -m posedyn
+"""The `posedyn` command line, the one CLI of the project (`posedyn ...` and `python -m service
 ...` run this `main`): each module here parses one family of commands' flags, calls the
 library, and prints a table or `--json`. No library module imports this package.
 
