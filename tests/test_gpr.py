@@ -48,6 +48,64 @@ def test_kronecker_likelihood_gradient_and_prediction_match_dense_formulas():
     assert np.allclose(std, np.sqrt(dense_var).reshape(3, 4).T, atol=1e-9)
 
 
+def _dense_posterior(model, Xs):
+    """GP posterior mean and latent std from the dense (nT) x (nT) covariance, built here from the
+    fitted GP's public hyperparameters (length scales, task covariance, noise variances) with
+    scipy's cdist: no code shared with the predictor."""
+    from scipy.spatial.distance import cdist
+
+    l, B, noise = model.length_scales, model.task_covariance, model.noise_variances
+    n, T = model.Y.shape
+    kx = np.exp(-0.5 * cdist(model.X / l, model.X / l, "sqeuclidean"))
+    ks = np.exp(-0.5 * cdist(Xs / l, model.X / l, "sqeuclidean"))
+    K = np.kron(B, kx) + np.kron(np.diag(noise), np.eye(n))
+    chol = np.linalg.cholesky(K)
+    alpha = np.linalg.solve(chol.T, np.linalg.solve(chol, model.Y.T.ravel()))
+    mean, std = np.empty((len(Xs), T)), np.empty((len(Xs), T))
+    for t in range(T):
+        cross = np.kron(B[t][None, :], ks)  # (m, n T): cov(f_t(x*), y)
+        mean[:, t] = cross @ alpha
+        v = np.linalg.solve(chol, cross.T)
+        std[:, t] = np.sqrt(B[t, t] - np.sum(v * v, axis=0))
+    return mean, std
+
+
+def test_fast_prediction_matches_the_dense_posterior_to_1e_9():
+    """The stacked predictor (all of a model's GPs at once, issue 22) against the dense posterior,
+    for single-task and 3-task GPs with their own length scales, output columns interleaved as a
+    model's groups are, at random queries inside and far outside the training inputs."""
+    rng = np.random.default_rng(7)
+    X = rng.uniform(-2, 2, (40, 3))
+    Y = np.column_stack([np.sin(X[:, 0]), np.cos(X[:, 1]) * X[:, 2], X[:, 0] * X[:, 1], np.sin(X[:, 2]) + 0.2 * X[:, 0]])
+    Y = Y + 0.05 * rng.standard_normal(Y.shape)
+    three = gp.GP(theta=np.concatenate([rng.normal(0, 0.4, 3), rng.normal(0, 0.6, 6), np.log([0.01, 0.02, 0.005])]), X=X, Y=Y[:, [0, 2, 3]])
+    one = gp.GP(theta=np.concatenate([rng.normal(0.3, 0.3, 3), [0.2], [np.log(0.01)]]), X=X, Y=Y[:, [1]])
+    Xs = np.vstack([rng.uniform(-2.5, 2.5, (300, 3)), rng.uniform(6, 9, (5, 3))])
+    predictor = gp.Predictor.of([three, one], [[0, 2, 3], [1]])
+    mean, std = predictor.predict(Xs, return_std=True)
+    for model, cols in ((three, [0, 2, 3]), (one, [1])):
+        dense_mean, dense_std = _dense_posterior(model, Xs)
+        scale = np.sqrt(np.mean(dense_mean**2, axis=0))
+        assert np.max(np.abs(mean[:, cols] - dense_mean) / scale) < 1e-9
+        assert np.max(np.abs(std[:, cols] / dense_std - 1.0)) < 1e-9
+        assert np.allclose(model.predict(Xs, return_std=True)[1], dense_std, rtol=1e-9, atol=0)
+    assert np.array_equal(predictor.predict(Xs), mean)  # without the std, the same means
+
+
+def test_fits_on_one_blas_thread_reach_the_same_optimum():
+    """`fit_gps` (a thread pool, one BLAS thread per fit) finds the optimum `fit_gp` finds with
+    the default BLAS threads, to 1e-6 in the log likelihood."""
+    rng = np.random.default_rng(3)
+    X = rng.uniform(-2, 2, (60, 3))
+    Y = np.column_stack([np.sin(X[:, 0]) + 0.4 * X[:, 1], np.sin(X[:, 0]) - 0.3 * X[:, 2], np.cos(X[:, 1])]) + 0.05 * rng.standard_normal((60, 3))
+    Y = (Y - Y.mean(0)) / Y.std(0)
+    groups = [Y[:, [0, 1]], Y[:, [2]]]
+    pooled = gp.fit_gps(X, groups, restarts=1, seed=4)
+    for k, (fitted, targets) in enumerate(zip(pooled, groups)):
+        alone = gp.fit_gp(X, targets, restarts=1, seed=4 + k)
+        assert fitted.log_marginal_likelihood() == pytest.approx(alone.log_marginal_likelihood(), rel=1e-6)
+
+
 def test_single_task_gp_matches_scikit_learn():
     rng = np.random.default_rng(1)
     X = rng.uniform(-2, 2, (50, 2))

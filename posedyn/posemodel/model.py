@@ -27,8 +27,6 @@ Methods:
 from __future__ import annotations
 
 import hashlib
-import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,7 +34,7 @@ import scipy.optimize
 
 from posedyn.errors import InputError, check_choice
 from posedyn.io import format_modal_table
-from posedyn.posemodel._gp import GP, fit_gp
+from posedyn.posemodel._gp import Predictor, fit_gps
 from posedyn.robot import direction_rows, tool_pose, twin_modes
 from posedyn.table import DIRECTIONS, JOINT_COLUMNS, ModalTable, PoseSet
 
@@ -234,8 +232,7 @@ class PoseModel:
             self.groups_ = [[t] for t in range(len(self.targets_))]
         self.X_train_ = (X - self.x_mean_) / self.x_scale_
         self.Z_train_ = Z
-        with ThreadPoolExecutor(self.workers or os.cpu_count() or 1) as pool:  # LAPACK releases the GIL
-            self.gps_ = list(pool.map(self._fit_group, self.groups_, range(len(self.groups_))))
+        self.gps_ = fit_gps(self.X_train_, [Z[:, g] for g in self.groups_], restarts=self.n_restarts, seed=self.random_state, workers=self.workers)
         self.n_poses_ = len(poses)
         self.training_hash_ = training_hash(table)
         return self
@@ -264,16 +261,13 @@ class PoseModel:
         self.prior_model_ = prior_model
         return prior, {"used": True, "stiffness_scales": scales.tolist(), "targets_with_prior": int(has.sum())}
 
-    def _fit_group(self, group: list[int], k: int) -> GP:
-        return fit_gp(self.X_train_, self.Z_train_[:, group], restarts=self.n_restarts, seed=self.random_state + k)
-
     def predict_log(self, poses: PoseSet):
         """Mean and std of ln(value) for every target at every pose, (n, T) each."""
         X = (feature_matrix(poses, self.features_) - self.x_mean_) / self.x_scale_
-        n, T = len(X), len(self.targets_)
-        mean, std = np.empty((n, T)), np.empty((n, T))
-        for group, gp in zip(self.groups_, self.gps_):
-            mean[:, group], std[:, group] = gp.predict(X, return_std=True)
+        predictor = self.__dict__.get("_predictor")
+        if predictor is None or predictor[0] is not self.gps_:  # all groups at once, built on first use
+            predictor = self._predictor = (self.gps_, Predictor.of(self.gps_, self.groups_))
+        mean, std = predictor[1].predict(X, return_std=True)
         mean = mean * self.y_scale_ + self.y_mean_
         std = std * self.y_scale_
         if self.physics_ and self.physics_.get("used"):
