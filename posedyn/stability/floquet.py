@@ -701,49 +701,72 @@ def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int
 # --- chatter frequency --------------------------------------------------------------------------
 
 
-def floquet_family(char: FloquetCharacteristic, a: float, theta: float, tau: float, keep: float = 0.05):
-    """(dominant Hz, ((Hz, relative amplitude), ...)) of the Floquet solution with multiplier
-    exp(i theta) at depth a: Fourier coefficients of p(t) = u(t) exp(-i theta t / tau), integrated
-    exactly over every segment (eigenbasis of its constant A)."""
+def floquet_families(char: FloquetCharacteristic, a, theta, tau, keep: float = 0.05) -> list:
+    """[(dominant Hz, ((Hz, relative amplitude), ...)), ...] of the Floquet solutions with
+    multipliers exp(i theta_b) at depths a_b and delays tau_b (batched): Fourier coefficients of
+    p(t) = u(t) exp(-i theta t / tau), integrated exactly over every segment (eigenbasis of its
+    constant A), harmonics up to twice the highest mode frequency."""
+    a, theta, tau = (np.asarray(x, dtype=float).reshape(-1) for x in np.broadcast_arrays(a, theta, tau))
+    if not len(a):
+        return []
+    out = []
+    # bounded memory: (segments x batch x harmonics x 2n) complex per chunk
+    top = char.dyn.wn_rad_s.max()
+    harmonics = np.ceil(2.0 * top * tau / (2.0 * np.pi)) + 4
+    per = len(char.fraction) * (2 * harmonics.max() + 1) * 2 * char.n
+    chunk = int(max(1, 1_000_000 // per))
+    for lo in range(0, len(a), chunk):
+        out += _families(char, a[lo : lo + chunk], theta[lo : lo + chunk], tau[lo : lo + chunk], keep)
+    return out
+
+
+def _families(char, a, theta, tau, keep):
+    B = len(a)
     nu = np.exp(-1j * theta)
     c = a * (1.0 - nu)
-    M = char.monodromy(np.array([c]), np.array([tau]))[0]
+    M = char.monodromy(c, tau)
     values, vectors = np.linalg.eig(M)
-    z = vectors[:, np.argmin(np.abs(values - 1.0 / nu))]
+    z = vectors[np.arange(B), :, np.argmin(np.abs(values - (1.0 / nu)[:, None]), axis=1)]  # (B, 2n)
     wT = 2.0 * np.pi / tau
     top = char.dyn.wn_rad_s.max()
-    K = int(np.ceil(2.0 * top / wT)) + 4
+    K = int(np.ceil(2.0 * top / wT.min())) + 4
     j = np.arange(-K, K + 1)
-    omega = theta / tau + j * wT
+    omega = theta[:, None] / tau[:, None] + j[None, :] * wT[:, None]  # (B, J)
+    s_count, n2 = len(char.fraction), z.shape[1]
     cut_idx = np.flatnonzero(char.cutting)
-    lam = np.empty((len(char.fraction), len(z)), dtype=complex)
-    V = np.empty((len(char.fraction), len(z), len(z)), dtype=complex)
+    lam = np.empty((s_count, B, n2), dtype=complex)
+    V = np.empty((s_count, B, n2, n2), dtype=complex)
     if len(cut_idx):
-        lam[cut_idx], V[cut_idx] = np.linalg.eig(char.generators(np.array([c]))[cut_idx, 0])
-    if len(cut_idx) < len(char.fraction):  # free flight: one eigen-decomposition of A0
+        lam[cut_idx], V[cut_idx] = np.linalg.eig(char.generators(c)[cut_idx])
+    if len(cut_idx) < s_count:  # free flight: one eigen-decomposition of A0
         lam0, V0 = char.free_eig()
         lam[~char.cutting], V[~char.cutting] = lam0, V0
-    dt, t0 = char.fraction * tau, char.start * tau
+    dt = char.fraction[:, None] * tau[None, :]  # (s, B)
+    t0 = char.start[:, None] * tau[None, :]
     Y = np.empty_like(lam)
-    for i in range(len(dt)):
-        Y[i] = y = np.linalg.solve(V[i], z)
-        z = V[i] @ (np.exp(lam[i] * dt[i]) * y)
-    x = lam[:, None, :] - 1j * omega[None, :, None]  # (s, J, 2n)
-    # exp(x dt) = exp(lam dt) exp(-i omega dt), the second factor per (segment, harmonic) only
-    e = np.exp(lam * dt[:, None])[:, None, :] * np.exp(-1j * omega[None, :] * dt[:, None])[:, :, None]
+    for i in range(s_count):
+        Y[i] = y = np.linalg.solve(V[i], z[:, :, None])[:, :, 0]
+        z = np.einsum("bij,bj->bi", V[i], np.exp(lam[i] * dt[i][:, None]) * y)
+    x = lam[:, :, None, :] - 1j * omega[None, :, :, None]  # (s, B, J, 2n)
+    # exp(x dt) = exp(lam dt) exp(-i omega dt), the second factor per (segment, speed, harmonic) only
+    e = np.exp(lam * dt[:, :, None])[:, :, None, :] * np.exp(-1j * omega[None] * dt[:, :, None])[:, :, :, None]
     with np.errstate(all="ignore"):
         g = (e - 1.0) / x
-    tiny = np.abs(x) * dt[:, None, None] < 1e-6
+    tiny = np.abs(x) * dt[:, :, None, None] < 1e-6
     if tiny.any():
-        g[tiny] = np.broadcast_to(dt[:, None, None], g.shape)[tiny]
-    P = np.einsum("dk,skm->sdm", char.S, V)  # (s, 2, 2n)
-    coeff = np.sum(np.exp(-1j * omega[None, :] * t0[:, None])[:, :, None] * ((g * Y[:, None, :]) @ np.swapaxes(P, 1, 2)), axis=0)
-    amplitude = np.sqrt(np.sum(np.abs(coeff) ** 2, axis=1))
+        g[tiny] = np.broadcast_to(dt[:, :, None, None], g.shape)[tiny]
+    P = np.einsum("dk,sbkm->sbdm", char.S, V)  # (s, B, 2, 2n)
+    weights = np.exp(-1j * omega[None] * t0[:, :, None])  # (s, B, J)
+    coeff = np.einsum("sbj,sbjm,sbm,sbdm->bjd", weights, g, Y, P, optimize=True)
+    amplitude = np.sqrt(np.sum(np.abs(coeff) ** 2, axis=2))  # (B, J)
     freq = np.abs(omega) / (2.0 * np.pi)
-    order = np.argsort(-amplitude)
-    top_amp = amplitude[order[0]]
-    family = tuple((float(freq[k]), float(amplitude[k] / top_amp)) for k in order if amplitude[k] >= keep * top_amp)
-    return float(freq[order[0]]), family
+    out = []
+    for b in range(B):
+        order = np.argsort(-amplitude[b])
+        top_amp = amplitude[b, order[0]]
+        family = tuple((float(freq[b, k]), float(amplitude[b, k] / top_amp)) for k in order if amplitude[b, k] >= keep * top_amp)
+        out.append((float(freq[b, order[0]]), family))
+    return out
 
 
 # --- public API ---------------------------------------------------------------------------------
@@ -1084,6 +1107,18 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
             a_f, t_f, ok, _, _ = _newton(batch, ea[ii], et[ii], etau[ii], tol=REFINE_TOL, Gc=Gc[ii], vec=np.array([full_vec[k] for k in sb]))
             ea[ii] = np.where(ok, a_f, ea[ii])
             et[ii] = np.where(ok, np.where(t_f > np.pi, 2 * np.pi - t_f, t_f), et[ii])
+    # chatter frequencies, batched per (structure, resolution)
+    wanted: dict = {}
+    for j, (s, e) in enumerate(jobs):
+        mine = np.flatnonzero(ej == j)
+        for rank, i in enumerate(mine[np.argsort(ea[mine])]):
+            if rank == 0 or branch_families:  # lobes: the lowest branch's frequency only
+                wanted.setdefault((s, int(level_job[j])), []).append(i)
+    family_of = {}
+    for (s, lv), members in wanted.items():
+        members = np.array(members, int)
+        for i, fam in zip(members, floquet_families(char(s, lv, True), ea[members], et[members], etau[members])):
+            family_of[int(i)] = fam
     points = []
     for j, (s, e) in enumerate(jobs):
         mine = np.flatnonzero(ej == j)
@@ -1092,14 +1127,9 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
             points.append(CriticalPoint(r, np.inf, np.nan, np.nan, (), base, np.nan, False, verified[j], ()))
             continue
         lv = level_job[j]
-        ch = char(s, lv, True)
-        tau = tau_all[e]
         branches = []
-        for rank, i in enumerate(mine[np.argsort(ea[mine])]):
-            if rank and not branch_families:  # lobes: the lowest branch's frequency only
-                hz, family = np.nan, ()
-            else:
-                hz, family = floquet_family(ch, ea[i], et[i], tau)
+        for i in mine[np.argsort(ea[mine])]:
+            hz, family = family_of.get(int(i), (np.nan, ()))
             branches.append((float(ea[i]), hz, float(et[i]), family, float(err[i])))
         a, hz, th, family, er = branches[0]
         points.append(CriticalPoint(r, a, hz, th, family, base * 2.0**lv, er, bool(conv_job[j] and er <= rel_tol), verified[j],
