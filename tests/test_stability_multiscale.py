@@ -83,3 +83,41 @@ def test_a_hard_case_is_flagged_not_silently_wrong():
     cut = Cut(teeth=1, kt_pa=974911890.7116745, kn_pa=436322561.1387025, radial_immersion=0.16599317940707128, milling="up")
     result = critical_points([structure(rows)], cut, 13540.495847689088)[0]
     assert result.depth_m < 0.03198 or not result.converged
+
+
+#: Twin poses of the gap workflow's campaigns at 800 rpm (seed 004's cut) where the seeds miss the
+#: lowest branches (two of them period-doubling, theta = pi, which the zeroth-order seeds never
+#: give): (rows, missed-branch depth mm before repair).
+MISSED = {
+    "flip": [("x", 13.0345, 0.03, 1600950.0), ("x", 15.4684, 0.03, 88869300.0), ("x", 1443.5, 0.069, 33000000.0), ("x", 5434.3, 0.011, 28800000.0),
+             ("y", 13.0345, 0.03, 758249000.0), ("y", 15.4684, 0.03, 1112160.0), ("y", 1480.0, 0.048, 64700000.0), ("y", 5418.8, 0.011, 27600000.0)],
+    "hopf": [("x", 11.2442, 0.03, 3881630000.0), ("x", 11.8578, 0.03, 3148640.0), ("x", 1443.5, 0.069, 33000000.0), ("x", 5434.3, 0.011, 28800000.0),
+             ("y", 11.2442, 0.03, 738001.0), ("y", 11.8578, 0.03, 193267000.0), ("y", 1480.0, 0.048, 64700000.0), ("y", 5418.8, 0.011, 27600000.0)],
+    "three_below": [("x", 13.1041, 0.03, 1335630.0), ("x", 17.7166, 0.03, 147513000.0), ("x", 1443.5, 0.069, 33000000.0), ("x", 5434.3, 0.011, 28800000.0),
+                    ("y", 13.1041, 0.03, 166756000.0), ("y", 17.7166, 0.03, 1472900.0), ("y", 1480.0, 0.048, 64700000.0), ("y", 5418.8, 0.011, 27600000.0)],
+}
+
+
+@pytest.mark.parametrize("name", sorted(MISSED))
+def test_a_missed_lower_branch_is_repaired_the_same_way_by_descent_and_by_bisection(name, monkeypatch):
+    """The winding count finds multipliers outside the unit circle below the seeds' answer; the
+    repair by Newton descent from the multipliers nearest 1 / nu gives the same boundary point as
+    the bisection on the count (forced here by disabling the descent)."""
+    from posedyn.stability import floquet
+
+    dyn = structure(MISSED[name])
+    fast = floquet.critical_depth(dyn, CUT, 800.0)
+    monkeypatch.setattr(floquet, "_descend", lambda *args: None)
+    slow = floquet.critical_depth(dyn, CUT, 800.0)
+    assert fast.repaired and fast.verified and fast.converged
+    assert fast.depth_m == pytest.approx(slow.depth_m, rel=1e-9) and fast.theta_rad == pytest.approx(slow.theta_rad, abs=1e-9)
+
+
+def test_the_repaired_depth_splits_growth_from_decay_in_the_independent_simulation():
+    """Three branches lie below the seeds' 2.34 mm; the repaired 0.718 mm (period doubling) is
+    where the independent simulation changes from decay (5 % below) to growth (5 % above)."""
+    result = critical_points([structure(MISSED["three_below"])], CUT, 800.0)[0]
+    assert result.converged and 0.6e-3 < result.depth_m < 0.8e-3
+    args = (MISSED["three_below"], CUT.teeth, CUT.kt_pa, CUT.kn_pa, CUT.radial_immersion, CUT.milling, 800.0)
+    assert not sim.grows(*args, 0.95 * result.depth_m)
+    assert sim.grows(*args, 1.05 * result.depth_m)
