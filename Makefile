@@ -50,8 +50,11 @@ demo: $(STAMP)
 		--pose-json '{"pose_id": "P5", "x_mm": 1400, "y_mm": 0, "z_mm": 800, "beta_deg": 0}'; status=$$?; \
 	kill -TERM $$pid; wait $$pid; cat build/demo/service.log; exit $$status
 
+# two workers (the CI machine has two cores), each test file on one worker (module fixtures once)
+PYTEST_ARGS ?= -n 2 --dist loadfile
+
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q $(PYTEST_ARGS)
 
 clean:
 	rm -rf $(VENV) build *.egg-info
