@@ -68,12 +68,12 @@ def test_the_override_says_it_is_not_estimated():
     assert result.accuracy_json() == {"method": "sdm", "converged": None, "rel_error_estimate": None, "steps": 40}
 
 
-def test_a_hard_case_is_flagged_not_silently_wrong():
+def test_a_hard_case_once_missed_is_now_found():
     """Found by the ranges exploration against the independent simulation (which decays at
-    31.21 mm and grows at 31.98 mm, about 4684 Hz): the engine's coarse check missed the lower
-    branch and reported 52.0 mm as converged. Checked again at the resolution the answer needed,
-    the miss is seen: the result is flagged not converged (finding the 31 mm branch itself is
-    open work, issue 17)."""
+    31.21 mm and grows at 31.98 mm, about 4684 Hz): the engine's seeds miss the lower branch and
+    said 52.0 mm; the winding count sees it and the repair (Newton from the multipliers nearest
+    the boundary after the bisection) now finds it. Checked live: the simulation decays 5 %
+    below the answer and grows 5 % above."""
     rows = [
         ("x", 3.4788947345062953, 0.0665111789662021, 4389275.395004164), ("x", 4.942389127913247, 0.07792997304811475, 1551067.1857480425),
         ("x", 18.37641300745519, 0.07868331259563725, 23707258.912512306), ("x", 4660.743644571466, 0.04090254710066207, 16216180.755774021),
@@ -81,8 +81,12 @@ def test_a_hard_case_is_flagged_not_silently_wrong():
         ("y", 1168.5837714133852, 0.01159082619221039, 23427973.381064713),
     ]
     cut = Cut(teeth=1, kt_pa=974911890.7116745, kn_pa=436322561.1387025, radial_immersion=0.16599317940707128, milling="up")
-    result = critical_points([structure(rows)], cut, 13540.495847689088)[0]
-    assert result.depth_m < 0.03198 or not result.converged
+    rpm = 13540.495847689088
+    result = critical_points([structure(rows)], cut, rpm)[0]
+    assert result.converged and 31.0e-3 < result.depth_m < 32.0e-3 and result.chatter_hz == pytest.approx(4684, rel=0.01)
+    args = (rows, cut.teeth, cut.kt_pa, cut.kn_pa, cut.radial_immersion, cut.milling, rpm)
+    assert not sim.grows(*args, 0.95 * result.depth_m)
+    assert sim.grows(*args, 1.05 * result.depth_m)
 
 
 #: Twin poses of the gap workflow's campaigns at 800 rpm (seed 004's cut) where the seeds miss the
@@ -113,11 +117,25 @@ def test_a_missed_lower_branch_is_repaired_the_same_way_by_descent_and_by_bisect
     assert fast.depth_m == pytest.approx(slow.depth_m, rel=1e-9) and fast.theta_rad == pytest.approx(slow.theta_rad, abs=1e-9)
 
 
+#: The ranges exploration's second silent miss (3 teeth, 2416 rpm, a/D 0.55, down; modes to 9.6 kHz):
+#: the seeds' 18.06 mm was flagged, the repair's Newton start after the bisection failed.
+R28_ROWS = [
+    ("x", 5.179577631197552, 0.04092661427840476, 2122076.650151308), ("x", 3644.8338406421603, 0.06959948692607798, 149961154.49135447),
+    ("x", 1020.7356999493663, 0.05711143870789903, 92792175.65742284), ("x", 2139.62463697327, 0.05800608599950343, 32070199.506354574),
+    ("x", 9632.033888154558, 0.013711185570647197, 27249360.257951103), ("y", 3.13484571836457, 0.07059681739874932, 7252686.317684013),
+    ("y", 3.9356495672812133, 0.03178897100976397, 774962.8883713213), ("y", 668.9588070105214, 0.01523877968646933, 75833241.9047256),
+    ("y", 3209.8074251083494, 0.06280810465349485, 25494077.51815003), ("y", 898.0821727951723, 0.06841533139772014, 148060176.65393144),
+]
+R28_CUT = Cut(teeth=3, kt_pa=446282162.52840394, kn_pa=136917837.5928905, radial_immersion=0.5500856075622679, milling="down")
+R28_RPM = 2415.8596377843432
+
+
 def test_the_repaired_depth_splits_growth_from_decay_in_the_independent_simulation():
-    """Three branches lie below the seeds' 2.34 mm; the repaired 0.718 mm (period doubling) is
-    where the independent simulation changes from decay (5 % below) to growth (5 % above)."""
-    result = critical_points([structure(MISSED["three_below"])], CUT, 800.0)[0]
-    assert result.converged and 0.6e-3 < result.depth_m < 0.8e-3
-    args = (MISSED["three_below"], CUT.teeth, CUT.kt_pa, CUT.kn_pa, CUT.radial_immersion, CUT.milling, 800.0)
+    """Two pairs of multipliers cross below the seeds' 18.06 mm; the repaired 14.65 mm (9459 Hz)
+    is where the independent simulation changes from decay (5 % below) to growth (5 % above, at
+    the 9.6 kHz mode)."""
+    result = critical_points([structure(R28_ROWS)], R28_CUT, R28_RPM)[0]
+    assert result.converged and 14.0e-3 < result.depth_m < 15.5e-3 and 9300 < result.chatter_hz < 9600
+    args = (R28_ROWS, R28_CUT.teeth, R28_CUT.kt_pa, R28_CUT.kn_pa, R28_CUT.radial_immersion, R28_CUT.milling, R28_RPM)
     assert not sim.grows(*args, 0.95 * result.depth_m)
     assert sim.grows(*args, 1.05 * result.depth_m)

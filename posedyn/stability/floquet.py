@@ -1181,38 +1181,48 @@ def _repair(char, tau, a_top):
 DESCENT_POINTS = 64
 DESCENT_STARTS = 4
 DESCENT_ROUNDS = 4
+#: Thetas sampled for the Newton starts after the bisection.
+BISECT_POINTS = 181
+
+
+def _newton_from_nearest(char, tau, a, points: int, starts: int):
+    """Boundary points (depth, theta folded to [0, pi]) reached by Newton on g = ln(nu sigma) = 0
+    from depth a and the `starts` thetas, among `points` in [0, pi], where an eigenvalue sigma of
+    M(a (1 - nu)) comes nearest to 1 / nu (local minima of min_k |ln(nu sigma_k)|), each on that
+    eigenvalue's eigenvector; sorted by depth."""
+    th = np.linspace(0.0, np.pi, points)
+    nu = np.exp(-1j * th)
+    values, vectors = np.linalg.eig(char.monodromy(a * (1.0 - nu), np.full(len(th), tau)))
+    with np.errstate(all="ignore"):
+        dist = np.abs(np.log(values * nu[:, None]))
+    dist = np.where(np.isfinite(dist), dist, np.inf)
+    k = np.argmin(dist, axis=1)
+    near = dist[np.arange(len(th)), k]
+    local = np.flatnonzero((near <= np.roll(near, 1)) & (near <= np.roll(near, -1)) & np.isfinite(near))
+    if not len(local):
+        return np.zeros(0), np.zeros(0)
+    first = local[np.argsort(near[local])[:starts]]
+    a_r, t_r, ok, _, _ = _newton(char, np.full(len(first), a), th[first], np.full(len(first), tau), vec=vectors[first, :, k[first]])
+    ok &= a_r > 0
+    t_r = np.mod(t_r[ok], 2.0 * np.pi)
+    order = np.argsort(a_r[ok])
+    return a_r[ok][order], np.minimum(t_r, 2.0 * np.pi - t_r)[order]
 
 
 def _descend(char, tau, a_top):
     """Where the winding count says multipliers are outside the unit circle at a = 0.98 a_top,
-    the branch they belong to crossed the circle below: Newton on g = ln(nu sigma) = 0 from the
-    DESCENT_STARTS thetas where an eigenvalue sigma of M(a (1 - nu)) comes nearest to 1 / nu
-    (local minima of min_k |ln(nu sigma_k)| over DESCENT_POINTS thetas) reaches such crossings. The lowest
-    crossing found is accepted when the count at 0.98 x its depth is 0 (otherwise the next round
+    the branch they belong to crossed the circle below: `_newton_from_nearest` at that depth
+    (DESCENT_STARTS starts among DESCENT_POINTS thetas) reaches such crossings directly. The lowest
+    crossing below a is accepted when the count at 0.98 x its depth is 0 (otherwise the next round
     starts from it). About 3 winding counts of work where the bisection takes 10. None when no
     round ends with a zero count."""
     a = VERIFY_FRACTION * a_top
-    best = None
     for _ in range(DESCENT_ROUNDS):
-        th = np.linspace(0.0, np.pi, DESCENT_POINTS)
-        nu = np.exp(-1j * th)
-        M = char.monodromy(a * (1.0 - nu), np.full(len(th), tau))
-        values, vectors = np.linalg.eig(M)
-        with np.errstate(all="ignore"):
-            dist = np.abs(np.log(values * nu[:, None]))
-        k = np.argmin(np.where(np.isfinite(dist), dist, np.inf), axis=1)
-        near = dist[np.arange(len(th)), k]
-        local = np.flatnonzero((near <= np.roll(near, 1)) & (near <= np.roll(near, -1)) & np.isfinite(near))
-        if not len(local):
+        a_r, t_r = _newton_from_nearest(char, tau, a, DESCENT_POINTS, DESCENT_STARTS)
+        below = a_r < a
+        if not below.any():
             return None
-        starts = local[np.argsort(near[local])[:DESCENT_STARTS]]
-        vec = vectors[starts, :, k[starts]]
-        a_r, t_r, ok, _, _ = _newton(char, np.full(len(starts), a), th[starts], np.full(len(starts), tau), vec=vec)
-        ok &= (a_r > 0) & (a_r < a)
-        if not ok.any():
-            return None
-        i = int(np.flatnonzero(ok)[np.argmin(a_r[ok])])
-        best = (float(a_r[i]), float(min(np.mod(t_r[i], 2 * np.pi), 2 * np.pi - np.mod(t_r[i], 2 * np.pi))))
+        best = (float(a_r[below][0]), float(t_r[below][0]))
         count, resolved, _ = unstable_count(char, VERIFY_FRACTION * best[0], tau, extra=[best[1]])
         if count == 0 and resolved:
             return best
@@ -1241,12 +1251,10 @@ def _bisect_repair(char, tau, a_top):
             hi = mid
         else:
             lo = mid
-    th = np.linspace(0.0, np.pi, 721)
-    nu = np.exp(-1j * th)
-    sig = np.linalg.eigvals(char.monodromy(hi * (1.0 - nu), np.full(len(th), tau))) * nu[:, None]
-    dist = np.abs(np.log(sig)).min(axis=1)
-    k = int(np.argmin(dist))
-    a_r, t_r, ok, _, _ = _newton(char, np.array([hi]), np.array([th[k]]), np.array([tau]))
-    if not ok[0]:
+    # the crossing lies between lo and hi (1 % apart): Newton from hi, the lowest point reached
+    # not above hi (a start that runs to a higher branch is no answer)
+    a_r, t_r = _newton_from_nearest(char, tau, hi, BISECT_POINTS, DESCENT_STARTS)
+    fit = a_r <= hi * (1.0 + 1e-9)
+    if not fit.any():
         return None
-    return float(a_r[0]), float(min(t_r[0], 2 * np.pi - t_r[0]))
+    return float(a_r[fit][0]), float(t_r[fit][0])
