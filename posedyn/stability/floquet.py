@@ -61,8 +61,10 @@ VERIFY_FRACTION x the depth is the number of zeros of h(nu) = det(I - nu M(a (1 
 step resolved (< pi/4 in phase, < x4 in modulus) means no boundary point lies below 0.98 x the
 reported depth, up to the resolution of the phase sampling (a zero pair closer to the circle
 than the sampling can see is not excluded) and the coarse level's W(t) error. A non-zero count
-triggers `_repair` (bisection in depth on the count, then Newton) and the result says
-`repaired=True`.
+triggers `_repair`: Newton from the thetas where an eigenvalue of M comes nearest 1 / nu at that
+depth (`_descend`; the seeds never give period-doubling branches, theta = pi, and those are the
+usual misses), else bisection in depth on the count, then Newton from the nearest multipliers;
+the result says `repaired=True`.
 
 The critical depth is the smallest converged boundary point. Its resolution is chosen, not
 given: the boundary point is found with `SUBSTEPS_PER_RAD` sub-steps per radian of cutting,
