@@ -417,16 +417,24 @@ def mode_bands(char: FloquetCharacteristic):
 
 def _solve_each(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Batched solve in which a singular (or non-finite) element gives NaN instead of an
-    exception for the whole batch."""
+    exception for the whole batch: on failure the singular elements are found by their LU
+    (slogdet's sign 0, the same zero pivot) and the others solved as one batch (a Python loop
+    over the elements made this 10 % of a 300-speed lobe computation)."""
     try:
         return np.linalg.solve(A, b)
     except np.linalg.LinAlgError:
         out = np.full(np.broadcast_shapes(A.shape[:-2], b.shape[:-2]) + b.shape[-2:], np.nan, dtype=np.result_type(A, b))
-        for i in range(len(A)):
-            try:
-                out[i] = np.linalg.solve(A[i], b[i])
-            except np.linalg.LinAlgError:
-                pass
+        with np.errstate(all="ignore"):
+            sign, logdet = np.linalg.slogdet(A)
+        fine = np.flatnonzero((sign != 0) & np.isfinite(logdet))
+        try:
+            out[fine] = np.linalg.solve(A[fine], b[fine])
+        except np.linalg.LinAlgError:  # a pivot LU and solve judge differently: one by one
+            for i in fine:
+                try:
+                    out[i] = np.linalg.solve(A[i], b[i])
+                except np.linalg.LinAlgError:
+                    pass
         return out
 
 
