@@ -427,14 +427,7 @@ def _solve_each(A: np.ndarray, b: np.ndarray) -> np.ndarray:
         with np.errstate(all="ignore"):
             sign, logdet = np.linalg.slogdet(A)
         fine = np.flatnonzero((sign != 0) & np.isfinite(logdet))
-        try:
-            out[fine] = np.linalg.solve(A[fine], b[fine])
-        except np.linalg.LinAlgError:  # a pivot LU and solve judge differently: one by one
-            for i in fine:
-                try:
-                    out[i] = np.linalg.solve(A[i], b[i])
-                except np.linalg.LinAlgError:
-                    pass
+        out[fine] = np.linalg.solve(A[fine], b[fine])
         return out
 
 
@@ -720,17 +713,18 @@ def floquet_families(char: FloquetCharacteristic, a, theta, tau, keep: float = 0
     if not len(a):
         return []
     out = []
+    # harmonics j = -K..K of each element's tooth frequency, K reaching twice the highest mode
+    harmonics = (np.ceil(2.0 * char.dyn.wn_rad_s.max() * tau / (2.0 * np.pi)) + 4).astype(int)
     # bounded memory: (segments x batch x harmonics x 2n) complex per chunk
-    top = char.dyn.wn_rad_s.max()
-    harmonics = np.ceil(2.0 * top * tau / (2.0 * np.pi)) + 4
     per = len(char.fraction) * (2 * harmonics.max() + 1) * 2 * char.n
     chunk = int(max(1, 1_000_000 // per))
     for lo in range(0, len(a), chunk):
-        out += _families(char, a[lo : lo + chunk], theta[lo : lo + chunk], tau[lo : lo + chunk], keep)
+        part = slice(lo, lo + chunk)
+        out += _families(char, a[part], theta[part], tau[part], int(harmonics[part].max()), keep)
     return out
 
 
-def _families(char, a, theta, tau, keep):
+def _families(char, a, theta, tau, K, keep):
     B = len(a)
     nu = np.exp(-1j * theta)
     c = a * (1.0 - nu)
@@ -738,8 +732,6 @@ def _families(char, a, theta, tau, keep):
     values, vectors = np.linalg.eig(M)
     z = vectors[np.arange(B), :, np.argmin(np.abs(values - (1.0 / nu)[:, None]), axis=1)]  # (B, 2n)
     wT = 2.0 * np.pi / tau
-    top = char.dyn.wn_rad_s.max()
-    K = int(np.ceil(2.0 * top / wT.min())) + 4
     j = np.arange(-K, K + 1)
     omega = theta[:, None] / tau[:, None] + j[None, :] * wT[:, None]  # (B, J)
     s_count, n2 = len(char.fraction), z.shape[1]
@@ -1177,9 +1169,9 @@ def _step_level(char, level, a_prev, t_prev, tau, Gc, vec):
 
 
 def _repair(char, tau, a_top):
-    """A boundary point below a_top missed by the seeds: first `_descend` (Newton from the most
-    unstable multipliers at VERIFY_FRACTION x a_top), else bisection in depth on the winding
-    count, then Newton from the theta where the multiplier is nearest the unit circle."""
+    """A boundary point below a_top missed by the seeds: first `_descend` (Newton from the
+    multipliers nearest the boundary condition at VERIFY_FRACTION x a_top), else bisection in
+    depth on the winding count, then Newton from the multipliers nearest it there."""
     if np.isfinite(a_top):
         found = _descend(char, tau, a_top)
         if found is not None:
