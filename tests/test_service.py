@@ -1,12 +1,12 @@
 """The Zenoh schedule service (issue 8), with real Zenoh sessions on 127.0.0.1: explicit
-endpoints, multicast scouting off."""
+endpoints, multicast scouting off. Limits and state: test_service_limits.py; security:
+test_service_security.py."""
 
 from __future__ import annotations
 
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -18,31 +18,15 @@ import pytest
 zenoh = pytest.importorskip("zenoh")
 
 from service.zenoh_service.client import ScheduleClient, ServiceError  # noqa: E402
-from service.zenoh_service.engine import ScheduleEngine  # noqa: E402
 from service.zenoh_service.server import ScheduleService, ServiceSettings  # noqa: E402
 from service.zenoh_service.session import zenoh_config  # noqa: E402
-
-ROOT = Path(__file__).resolve().parents[1]
-CUT = ROOT / "datasets/seeds/hou2023_cut.toml"
-TWIN = ROOT / "datasets/robots/kr_r2700_twin.toml"
-P5 = {"pose_id": "P5", "x_mm": 1400.0, "y_mm": 0.0, "z_mm": 800.0, "beta_deg": 0.0}
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from service.zenoh_service.workers import EngineSpec  # noqa: E402
+from tests.zenoh_helpers import CUT, P5, ROOT, TWIN, certificates, free_port, late_subscriber, serve, train_model  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def model_dir(tmp_path_factory) -> Path:
-    from posedyn.posemodel import PoseModel
-    from posedyn.io import read_modal_table
-    from posedyn.io.model_dir import save_model
-
-    folder = tmp_path_factory.mktemp("model") / "hou2023"
-    save_model(PoseModel(method="stgp").fit(read_modal_table(ROOT / "datasets/seeds/hou2023_positions.csv")), folder)
-    return folder
+    return train_model(tmp_path_factory.mktemp("model") / "hou2023")
 
 
 @pytest.fixture(scope="module")
@@ -50,7 +34,7 @@ def service(model_dir, tmp_path_factory):
     port = free_port()
     state = tmp_path_factory.mktemp("state")
     settings = ServiceSettings("cell1", max_payload_bytes=4096, queue_size=2, workers=1)
-    svc = ScheduleService(ScheduleEngine(model_dir, CUT, twin=TWIN), settings, zenoh_config(None, "peer", [f"tcp/127.0.0.1:{port}"]), state).start()
+    svc = ScheduleService(EngineSpec(model_dir, CUT, twin=TWIN), settings, zenoh_config(None, "peer", [f"tcp/127.0.0.1:{port}"]), state).start()
     yield svc, f"tcp/127.0.0.1:{port}"
     svc.close()
 
@@ -71,7 +55,7 @@ def test_query_returns_what_posedyn_schedule_writes(client, model_dir, tmp_path)
     assert cli.returncode == 0, cli.stderr
     expected = json.loads(cli.stdout)[0]
     got = client.schedule(P5)
-    for key in ("model_version", "computed_at", "stale_after_s"):
+    for key in ("model_version", "service_id", "computed_at", "stale_after_s"):
         assert key in got
         got.pop(key)
     assert got == expected
@@ -111,81 +95,52 @@ def test_every_bad_input_gets_its_error_and_the_service_keeps_answering(client):
     assert status["errors"] >= len(cases) and status["cache_hits"] >= 1
 
 
-def test_a_failing_computation_is_an_error_reply_not_a_timeout(service, client, monkeypatch):
+def test_a_worker_that_dies_is_an_error_reply_and_the_service_goes_on(service, client):
+    """Kill the worker process in the middle of a computation: the querier gets `internal` at
+    once (not a timeout), the pool is started again and the next query is answered."""
     svc, _ = service
 
-    def broken(pose, cut):
-        raise RuntimeError("boom")
+    def kill_when_computing():
+        deadline = time.monotonic() + 10
+        while svc.status()["computing"] == 0 and time.monotonic() < deadline:
+            time.sleep(0.001)
+        for pid in svc.pool.pids():
+            os.kill(pid, signal.SIGKILL)
 
-    monkeypatch.setattr(svc.scheduler, "entry", broken)
+    killer = threading.Thread(target=kill_when_computing)
+    killer.start()
     start = time.monotonic()
     with pytest.raises(ServiceError) as err:
         client.schedule({"x_mm": 1333.0, "y_mm": 0.0, "z_mm": 800.0, "beta_deg": 0.0})
-    assert err.value.code == "internal" and "boom" in err.value.message
-    assert time.monotonic() - start < 5
-    monkeypatch.undo()
-    assert client.schedule(P5)["critical_depth_mm"] > 0
+    killer.join()
+    assert err.value.code == "internal" and "worker process died" in err.value.message
+    assert time.monotonic() - start < 15
+    assert client.schedule(P5)["critical_depth_mm"] > 0  # from the cache
+    assert client.schedule({"x_mm": 1334.0, "y_mm": 0.0, "z_mm": 800.0, "beta_deg": 0.0})["critical_depth_mm"] > 0  # a new worker computes it
 
 
-def test_overload_is_answered_busy(service, client):
-    """Queue of 2, one worker: a burst of new poses gets 'busy' at once for some, schedules for
-    the rest, and nobody waits for a timeout."""
-    results = []
-
-    def ask(x):
-        try:
-            results.append(client.schedule({"x_mm": x, "y_mm": 0.0, "z_mm": 800.0, "beta_deg": 0.0})["pose_id"])
-        except ServiceError as exc:
-            results.append(exc.code)
-
-    threads = [threading.Thread(target=ask, args=(1250.0 + 7 * i,)) for i in range(8)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(60)
-    assert len(results) == 8 and "busy" in results and "pose" in results
-    assert set(results) <= {"busy", "pose"}
-
-
-def _late_subscriber(endpoint: str, key: str, wait_s: float = 8.0) -> list[dict]:
-    from zenoh.ext import HistoryConfig, declare_advanced_subscriber
-
-    got = []
-    conf = zenoh_config(None, "client", connect=[endpoint])
-    with zenoh.open(conf) as session:
-        sub = declare_advanced_subscriber(session, key, lambda s: got.append(json.loads(s.payload.to_bytes())), history=HistoryConfig(detect_late_publishers=True))
-        deadline = time.monotonic() + wait_s
-        while time.monotonic() < deadline and not got:
-            time.sleep(0.05)
-        time.sleep(0.5)
-        sub.undeclare()
-    return got
-
-
-def test_a_late_subscriber_gets_a_plan_published_before_it_joined(service, client):
+def test_a_plan_is_published_live_entry_by_entry_and_whole_to_late_subscribers(service, client):
     poses = [dict(P5, pose_id="a"), {"pose_id": "b", "x_mm": 1500.0, "y_mm": 0.0, "z_mm": 800.0, "beta_deg": 0.0}]
-    plan = client.plan("job-7", poses)
+    live = []
+    with zenoh.open(zenoh_config(None, "client", connect=[service[1]])) as s:
+        sub = s.declare_subscriber("cells/cell1/posedyn/schedules/job-7/*", lambda sample: live.append(json.loads(sample.payload.to_bytes())))
+        time.sleep(0.3)
+        plan = client.plan("job-7", poses, timeout_s=60)
+        deadline = time.monotonic() + 10
+        while len(live) < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        sub.undeclare()
     assert [e["pose_id"] for e in plan["entries"]] == ["a", "b"]
-    got = _late_subscriber(service[1], "cells/cell1/posedyn/schedules/job-7/*")
-    assert sorted(e["pose_id"] for e in got) == ["a", "b"]
-    whole = _late_subscriber(service[1], "cells/cell1/posedyn/schedules/job-7")
-    assert whole and whole[-1]["plan_id"] == "job-7"
+    assert sorted(e["pose_id"] for e in live) == ["a", "b"]
+    whole = late_subscriber(service[1], "cells/cell1/posedyn/schedules/job-7")
+    assert whole and whole[-1]["plan_id"] == "job-7" and whole[-1]["entries"] == plan["entries"]
     assert client.stored_plan("job-7")["entries"] == plan["entries"]
-
-
-def _serve(model_dir, state, endpoint, extra=()):
-    cmd = [sys.executable, "-c", "from service.cli import main; main()", "serve", "--model", str(model_dir), "--cell", "cell2", "--cut", str(CUT),
-           "--listen", endpoint, "--state-dir", str(state), *extra]
-    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
-    line = proc.stdout.readline()
-    assert line.startswith("serving"), (line, proc.stderr.read() if proc.poll() is not None else "")
-    return proc
 
 
 def test_a_killed_service_restarts_with_its_plans(model_dir, tmp_path):
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     state = tmp_path / "state"
-    proc = _serve(model_dir, state, endpoint)
+    proc = serve(model_dir, state, endpoint)
     try:
         with ScheduleClient("cell2", connect=[endpoint], timeout_s=30) as c:
             plan = c.plan("last", [P5])
@@ -193,9 +148,9 @@ def test_a_killed_service_restarts_with_its_plans(model_dir, tmp_path):
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
     assert list((state / "plans").glob("*.json")) == [state / "plans" / "last.json"]
-    proc = _serve(model_dir, state, endpoint)
+    proc = serve(model_dir, state, endpoint)
     try:
-        got = _late_subscriber(endpoint, "cells/cell2/posedyn/schedules/last")
+        got = late_subscriber(endpoint, "cells/cell2/posedyn/schedules/last")
         assert got and got[-1]["entries"] == plan["entries"]
     finally:
         proc.send_signal(signal.SIGTERM)  # graceful: closes the session, exits 0
@@ -203,29 +158,17 @@ def test_a_killed_service_restarts_with_its_plans(model_dir, tmp_path):
     assert proc.returncode == 0 and "stopped" in out
 
 
-def _certificates(folder: Path) -> dict:
-    """A CA and a server certificate for localhost / 127.0.0.1, made with openssl."""
-    def run(*args):
-        subprocess.run(["openssl", *args], check=True, capture_output=True, cwd=folder)
-
-    run("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "ca.key", "-out", "ca.pem", "-days", "2", "-subj", "/CN=posedyn test CA")
-    run("req", "-newkey", "rsa:2048", "-nodes", "-keyout", "server.key", "-out", "server.csr", "-subj", "/CN=localhost")
-    (folder / "ext.cnf").write_text("subjectAltName=DNS:localhost,IP:127.0.0.1\n")
-    run("x509", "-req", "-in", "server.csr", "-CA", "ca.pem", "-CAkey", "ca.key", "-CAcreateserial", "-out", "server.pem", "-days", "2", "-extfile", "ext.cnf")
-    return {name: str(folder / name) for name in ("ca.pem", "server.key", "server.pem")}
-
-
 def test_tls_works_and_a_client_without_the_certificate_is_refused(model_dir, tmp_path):
     if not __import__("shutil").which("openssl"):
         pytest.skip("openssl is needed to make the test certificates")
-    certs = _certificates(tmp_path)
+    certs = certificates(tmp_path, clients=())
     port = free_port()
     server_conf = tmp_path / "server.json5"
     server_conf.write_text(json.dumps({"transport": {"link": {"tls": {"listen_private_key": certs["server.key"], "listen_certificate": certs["server.pem"], "root_ca_certificate": certs["ca.pem"]}}}}))
     client_conf = tmp_path / "client.json5"
     client_conf.write_text(json.dumps({"transport": {"link": {"tls": {"root_ca_certificate": certs["ca.pem"]}}}}))
     endpoint = f"tls/localhost:{port}"
-    proc = _serve(model_dir, tmp_path / "state", endpoint, ["--config", str(server_conf)])
+    proc = serve(model_dir, tmp_path / "state", endpoint, ["--config", str(server_conf)])
     try:
         with ScheduleClient("cell2", connect=[endpoint], config=client_conf, timeout_s=30) as c:
             assert c.schedule(P5)["pose_id"] == "P5"
@@ -276,7 +219,7 @@ def test_a_plan_put_is_published_and_the_service_is_alive(service):
         assert alive and alive[0].ok is not None
         session.put("cells/cell1/posedyn/plan/put-1", json.dumps({"poses": [dict(P5, pose_id="p")]}))
         session.put("cells/cell1/posedyn/plan/put-2", b"not json")  # refused and counted, nothing dies
-    got = _late_subscriber(service[1], "cells/cell1/posedyn/schedules/put-1", wait_s=30)
+    got = late_subscriber(service[1], "cells/cell1/posedyn/schedules/put-1", wait_s=30)
     assert got and got[-1]["entries"][0]["pose_id"] == "p"
     with ScheduleClient("cell1", connect=[service[1]]) as c:
         assert c.status()["plans_published"] >= 1

@@ -16,17 +16,18 @@ from posedyn.errors import InputError
 from posedyn.io import read_pose_table
 from service.cli.common import console, resolve_cut
 from service.zenoh_service.client import ScheduleClient, ServiceError
-from service.zenoh_service.engine import ScheduleEngine
 from service.zenoh_service.protocol import RequestError
 from service.zenoh_service.server import ScheduleService, ServiceSettings
-from service.zenoh_service.session import zenoh_config
+from service.zenoh_service.session import DEFAULT_LISTEN, zenoh_config
+from service.zenoh_service.signing import read_key
+from service.zenoh_service.workers import EngineSpec
 
 
 def serve(
     model: Path = typer.Option(..., "--model", help="Model directory (posedyn train)."),
     cell: str = typer.Option(..., "--cell", help="Cell name: keys live under cells/CELL/posedyn/."),
     cut: Optional[Path] = typer.Option(None, "--cut", help="Default cut (TOML; default: MODEL_DIR/cut.toml); a request's cut fields override it."),
-    listen: list[str] = typer.Option([], "--listen", help="Zenoh endpoint to listen on (repeatable), e.g. tcp/0.0.0.0:7447."),
+    listen: list[str] = typer.Option([], "--listen", help=f"Zenoh endpoint to listen on (repeatable), e.g. tls/0.0.0.0:7447 (default without --connect or --config: {DEFAULT_LISTEN}, this machine only)."),
     connect: list[str] = typer.Option([], "--connect", help="Zenoh endpoint to connect to (repeatable)."),
     mode: str = typer.Option("peer", "--mode", help="peer (embedded, default), client or router."),
     config: Optional[Path] = typer.Option(None, "--config", help="Zenoh config (JSON5): TLS, authentication, access control."),
@@ -34,24 +35,35 @@ def serve(
     absorber: Optional[Path] = typer.Option(None, "--absorber", help="Absorber file (default: seed 004's design)."),
     actuator: Optional[Path] = typer.Option(None, "--actuator", help="Actuator file (default: seed 000's)."),
     twin: Optional[Path] = typer.Option(None, "--twin", help="Twin file for the reachability check when the model has none (default: the shipped KR R2700 twin)."),
-    max_payload_bytes: int = typer.Option(65536, "--max-payload-bytes", min=64),
-    queue_size: int = typer.Option(32, "--queue-size", min=1, help="Requests waiting for a computation before 'busy'."),
-    workers: int = typer.Option(1, "--workers", min=1, help="Computation threads."),
+    signing_key: Optional[Path] = typer.Option(None, "--signing-key", help="Key file (>= 32 bytes) shared with the cell: every reply and publication carries its HMAC."),
+    max_payload_bytes: int = typer.Option(65536, "--max-payload-bytes", min=64, help="Largest schedule request."),
+    max_plan_payload_bytes: int = typer.Option(1 << 20, "--max-plan-payload-bytes", min=64, help="Largest plan request."),
+    queue_size: int = typer.Option(32, "--queue-size", min=1, help="Schedules waiting for a worker before 'busy'."),
+    workers: int = typer.Option(1, "--workers", min=1, help="Worker processes (one core each)."),
     stale_after_s: float = typer.Option(3600.0, "--stale-after-s", help="How long a schedule is valid for the cell."),
+    cache_entries: int = typer.Option(20_000, "--cache-entries", min=1, help="Schedules kept in memory (about 2.5 KB each)."),
+    plans_in_memory: int = typer.Option(16, "--plans-in-memory", min=1, help="Plans held with a publisher for late joiners."),
+    pending_plans: int = typer.Option(4, "--pending-plans", min=1, help="Plans computed at once before 'busy'."),
+    stored_plans: int = typer.Option(256, "--stored-plans", min=1, help="Plan files kept in --state-dir."),
 ):
     """Serve per-pose schedules over Zenoh until SIGTERM or SIGINT."""
     if mode not in ("peer", "client", "router"):
         raise InputError("--mode peer, client or router", got=mode, column="--mode")
     cut = resolve_cut(cut, model)
-    for path in filter(None, (model, cut, config, absorber, actuator, twin)):
+    for path in filter(None, (model, cut, config, absorber, actuator, twin, signing_key)):
         if not path.exists():
             raise InputError("an existing file or directory", got="missing", file=str(path))
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
-        settings = ServiceSettings(cell, max_payload_bytes, queue_size, workers, stale_after_s)
+        settings = ServiceSettings(cell, max_payload_bytes, max_plan_payload_bytes, queue_size, workers, stale_after_s,
+                                   cache_entries=cache_entries, plans_in_memory=plans_in_memory, pending_plans=pending_plans, stored_plans=stored_plans)
     except RequestError as exc:
         raise InputError("a cell name of letters, digits, - or _", got=cell, column="--cell") from exc
-    engine = ScheduleEngine(model, cut, absorber, actuator, twin)
+    key = read_key(signing_key) if signing_key else None
+    spec = EngineSpec(model, cut, absorber, actuator, twin)
+    spec.build()  # every file checked here, with its name in the error, before any process starts
+    if not listen and not connect and config is None:
+        listen = [DEFAULT_LISTEN]
     try:
         conf = zenoh_config(config, mode, listen, connect)
     except Exception as exc:  # zenoh reports a bad config file or key as ZError / ValueError
@@ -59,13 +71,15 @@ def serve(
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
-    service = ScheduleService(engine, settings, conf, state_dir)
+    service = ScheduleService(spec, settings, conf, state_dir, signing_key=key)
     try:
         service.start()
-    except Exception as exc:  # noqa: BLE001 - e.g. a port in use or a TLS file missing
-        raise InputError("a Zenoh session that opens", got=str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__, file=str(config) if config else None) from None
+    except Exception as exc:  # noqa: BLE001 - e.g. a port in use, a TLS file missing, a state folder not writable
+        raise InputError("a service that starts (Zenoh session, worker processes, state folder)", got=str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__,
+                         file=str(config) if config else None) from None
     try:
-        print(f"serving cells/{cell}/posedyn (model {engine.model_version[:12]}) mode {mode} listen {list(listen)} connect {list(connect)}", flush=True)
+        print(f"serving cells/{cell}/posedyn (model {service.model_version[:12]}, service id {service.service_id}) mode {mode} listen {list(listen)} connect {list(connect)}"
+              f"{', signed' if key else ''}", flush=True)
         while not stop.wait(0.5):
             pass
     finally:
@@ -81,6 +95,8 @@ def query(
     plan_id: Optional[str] = typer.Option(None, "--plan-id", help="Plan id (default: the CSV's file name)."),
     cut_json: Optional[str] = typer.Option(None, "--cut-json", help="Cut fields overriding the service's default cut."),
     config: Optional[Path] = typer.Option(None, "--config", help="Zenoh config (JSON5), e.g. TLS certificates."),
+    service_id: Optional[str] = typer.Option(None, "--service-id", help="Accept replies from this Zenoh session only (printed by posedyn serve)."),
+    signing_key: Optional[Path] = typer.Option(None, "--signing-key", help="The service's key file: accept signed replies only."),
     timeout_s: float = typer.Option(5.0, "--timeout-s"),
     as_json: bool = typer.Option(False, "--json"),
 ):
@@ -88,8 +104,9 @@ def query(
     if (pose_json is None) == (plan is None):
         raise InputError("either --pose-json or --plan", column="--pose-json")
     cut = _json_option(cut_json, "--cut-json") if cut_json else None
+    key = read_key(signing_key) if signing_key else None
     try:
-        client = ScheduleClient(cell, connect=connect, config=config, timeout_s=timeout_s).open()
+        client = ScheduleClient(cell, connect=connect, config=config, timeout_s=timeout_s, service_id=service_id, signing_key=key).open()
     except Exception as exc:  # noqa: BLE001 - zenoh could not open (no route, TLS refused)
         raise InputError("a Zenoh session that connects", got=str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__, column="--connect") from None
     try:
@@ -105,6 +122,9 @@ def query(
         client.close()
     if as_json:
         print(json.dumps(result, indent=2))
+        return
+    if result.get("state") in ("accepted", "pending"):
+        console.print(f"plan {result['plan_id']}: {result['done']} of {result['total']} poses computed; the service goes on and publishes it at cells/{cell}/posedyn/schedules/{result['plan_id']} when done")
         return
     entries = result.get("entries", [result])
     for e in entries:

@@ -1,5 +1,5 @@
 """The computation behind the service: a pose (and cut overrides) in, the `posedyn schedule`
-entry out, from a trained model. No network here; the service calls it off the Zenoh threads."""
+entry out, from a trained model. No network here; the service runs it in worker processes."""
 
 from __future__ import annotations
 
@@ -47,19 +47,22 @@ class ScheduleEngine:
     def entry(self, pose: dict, cut: dict) -> dict:
         """The schedule entry of one pose (RequestError for a pose or cut it cannot serve)."""
         poses = self.pose_set(pose)
+        config = self.config(cut)
+        table = self.model.predict_table(poses)
+        return schedule_entries(table, config)[0]
+
+    def config(self, cut: dict) -> ScheduleConfig:
+        """The schedule settings with a request's cut overrides."""
         try:
-            the_cut = self.cut
             overrides = {k: cut[k] for k in ("teeth", "radial_immersion", "milling", "feed_angle_deg") if k in cut}
             if "kt_mpa" in cut:
                 overrides["kt_pa"] = cut["kt_mpa"] * 1e6
             if "kn_mpa" in cut:
                 overrides["kn_pa"] = cut["kn_mpa"] * 1e6
-            the_cut = replace(the_cut, **overrides)
-            config = ScheduleConfig(the_cut, cut.get("rpm", self.rpm), self.absorber, control=self.control, steps=self.steps)
+            the_cut = replace(self.cut, **overrides)
+            return ScheduleConfig(the_cut, cut.get("rpm", self.rpm), self.absorber, control=self.control, steps=self.steps)
         except InputError as exc:
             raise RequestError("invalid_field", f"cut: {exc}") from None
-        table = self.model.predict_table(poses)
-        return schedule_entries(table, config)[0]
 
     def pose_set(self, pose: dict):
         try:

@@ -9,16 +9,43 @@ import math
 POSE_FIELDS = ("pose_id", "x_mm", "y_mm", "z_mm", "beta_deg", "a_deg", "b_deg", "c_deg")
 CUT_FIELDS = ("rpm", "teeth", "kt_mpa", "kn_mpa", "radial_immersion", "milling", "feed_angle_deg")
 
+# Physical ranges, (low, high, low inclusive). Positions: a robot cell's workspace (the largest
+# industrial arms reach about 3.9 m; the pose model and inverse kinematics narrow it further).
+# Cut: spindle speeds of milling spindles, cutting-force coefficients from soft aluminium
+# (~100 MPa) to hardened steel and nickel alloys (~6 GPa) with margin.
+RANGES = {
+    "x_mm": (-10_000.0, 10_000.0, True),
+    "y_mm": (-10_000.0, 10_000.0, True),
+    "z_mm": (-10_000.0, 10_000.0, True),
+    "beta_deg": (-360.0, 360.0, True),
+    "a_deg": (-360.0, 360.0, True),
+    "b_deg": (-360.0, 360.0, True),
+    "c_deg": (-360.0, 360.0, True),
+    "rpm": (100.0, 100_000.0, True),
+    "kt_mpa": (0.0, 20_000.0, False),
+    "kn_mpa": (0.0, 20_000.0, True),
+    "radial_immersion": (0.0, 1.0, False),
+    "feed_angle_deg": (-360.0, 360.0, True),
+}
+MAX_TEETH = 32
+TIMEOUT_MS = (1, 3_600_000)  # the querier's budget for one request
+
 
 class RequestError(Exception):
     """A request the service refuses: `code` (machine-readable) and a message for people."""
 
-    def __init__(self, code: str, message: str):
+    def __init__(self, code: str, message: str, retry_after_ms: int | None = None):
         super().__init__(message)
-        self.code, self.message = code, message
+        self.code, self.message, self.retry_after_ms = code, message, retry_after_ms
+
+    def __reduce__(self):  # crosses the worker processes' boundary intact
+        return RequestError, (self.code, self.message, self.retry_after_ms)
 
     def to_json(self) -> bytes:
-        return json.dumps({"error": self.code, "message": self.message}).encode()
+        doc = {"error": self.code, "message": self.message}
+        if self.retry_after_ms is not None:
+            doc["retry_after_ms"] = self.retry_after_ms
+        return json.dumps(doc).encode()
 
 
 def parse_json(payload: bytes | None, max_bytes: int, required: bool = True):
@@ -62,9 +89,17 @@ def _number(obj: dict, key: str, where: str, required: bool = True):
     value = obj[key]
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise RequestError("invalid_field", f"{where}.{key}: expected a number, got {json.dumps(value)[:40]}")
-    if not math.isfinite(value):
+    try:
+        number = float(value)  # an integer of hundreds of digits overflows here
+    except OverflowError:
+        raise RequestError("invalid_field", f"{where}.{key}: expected a number within the float range, got an integer of {len(str(value))} digits") from None
+    if not math.isfinite(number):
         raise RequestError("not_finite", f"{where}.{key}: expected a finite number, got {value}")
-    return float(value)
+    if key in RANGES:
+        low, high, closed = RANGES[key]
+        if not (low <= number if closed else low < number) or number > high:
+            raise RequestError("invalid_field", f"{where}.{key}: expected {'[' if closed else '('}{low:g}, {high:g}], got {number:g}")
+    return number
 
 
 def parse_pose(value, where: str = "pose") -> dict:
@@ -98,34 +133,48 @@ def parse_cut(value, where: str = "cut") -> dict:
             cut[key] = obj[key]
         elif key == "teeth":
             teeth = obj[key]
-            if isinstance(teeth, bool) or not isinstance(teeth, int) or not 1 <= teeth <= 100:
-                raise RequestError("invalid_field", f"{where}.teeth: expected an integer from 1 to 100, got {json.dumps(teeth)[:40]}")
+            if isinstance(teeth, bool) or not isinstance(teeth, int) or not 1 <= teeth <= MAX_TEETH:
+                raise RequestError("invalid_field", f"{where}.teeth: expected an integer from 1 to {MAX_TEETH}, got {json.dumps(teeth)[:40]}")
             cut[key] = teeth
         else:
             cut[key] = _number(obj, key, where)
     return cut
 
 
-def parse_schedule_request(payload: bytes | None, max_bytes: int) -> tuple[dict, dict]:
+def parse_timeout(obj: dict) -> float | None:
+    """The querier's budget in seconds (`timeout_ms`, optional): work it cannot wait for is refused
+    `busy` at once, or dropped when its time has passed before a worker is free."""
+    if "timeout_ms" not in obj:
+        return None
+    value = obj["timeout_ms"]
+    low, high = TIMEOUT_MS
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        raise RequestError("invalid_field", f"request.timeout_ms: expected an integer from {low} to {high}, got {json.dumps(value)[:40]}")
+    return value / 1000.0
+
+
+def parse_schedule_request(payload: bytes | None, max_bytes: int) -> tuple[dict, dict, float | None]:
+    """(pose, cut overrides, the querier's budget in s or None)."""
     doc = parse_json(payload, max_bytes)
-    obj = _object(doc, "request", ("pose", "cut"))
+    obj = _object(doc, "request", ("pose", "cut", "timeout_ms"))
     if "pose" not in obj:
         raise RequestError("missing_field", "request.pose: expected a pose object, got nothing")
-    return parse_pose(obj["pose"]), parse_cut(obj.get("cut"))
+    return parse_pose(obj["pose"]), parse_cut(obj.get("cut")), parse_timeout(obj)
 
 
-def parse_plan_request(payload: bytes | None, max_bytes: int, max_poses: int) -> tuple[list[dict], dict] | None:
-    """None when there is no payload (a query for a stored plan)."""
+def parse_plan_request(payload: bytes | None, max_bytes: int, max_poses: int) -> tuple[list[dict], dict, float | None] | None:
+    """(poses, cut overrides, the querier's budget in s or None); None when there is no payload
+    (a query for a stored plan)."""
     doc = parse_json(payload, max_bytes, required=False)
     if doc is None:
         return None
-    obj = _object(doc, "request", ("poses", "cut"))
+    obj = _object(doc, "request", ("poses", "cut", "timeout_ms"))
     poses = obj.get("poses")
     if not isinstance(poses, list) or not poses:
         raise RequestError("missing_field" if poses is None else "invalid_field", "request.poses: expected a non-empty list of pose objects")
     if len(poses) > max_poses:
         raise RequestError("payload_too_large", f"request.poses: expected at most {max_poses} poses, got {len(poses)}")
-    return [parse_pose(p, f"poses[{i}]") for i, p in enumerate(poses)], parse_cut(obj.get("cut"))
+    return [parse_pose(p, f"poses[{i}]") for i, p in enumerate(poses)], parse_cut(obj.get("cut")), parse_timeout(obj)
 
 
 def valid_plan_id(plan_id: str) -> str:

@@ -1,4 +1,5 @@
-"""Zenoh session configuration shared by the server and the client."""
+"""Zenoh session configuration shared by the server and the client, and the service's default
+access control."""
 
 from __future__ import annotations
 
@@ -6,6 +7,9 @@ import json
 from pathlib import Path
 
 import zenoh
+
+#: Where `posedyn serve` listens when it is given no endpoint and no config: this machine only.
+DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
 
 
 def zenoh_config(config_file: Path | None = None, mode: str | None = None, listen=(), connect=()):
@@ -20,4 +24,37 @@ def zenoh_config(config_file: Path | None = None, mode: str | None = None, liste
         conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
     if listen or connect:
         conf.insert_json5("scouting/multicast/enabled", "false")
+    return conf
+
+
+def service_acl(prefix: str) -> dict:
+    """Access control that keeps the service's own keys its own, whoever connects: no remote put
+    or delete on its results (`schedules/**`), no remote queryable, liveliness token or
+    publication on any of its keys (a rogue `schedule` queryable or `alive` token is not routed);
+    everything else allowed. Zenoh filters what arrives from other sessions (ingress), so the
+    service's own publications and replies pass."""
+    return {
+        "enabled": True,
+        "default_permission": "allow",
+        "rules": [
+            {"id": "service keys are the service's", "permission": "deny", "flows": ["ingress"],
+             "messages": ["put", "delete", "declare_queryable", "liveliness_token"],
+             "key_exprs": [f"{prefix}/schedules/**", f"{prefix}/schedule", f"{prefix}/status", f"{prefix}/alive"]},
+            {"id": "no rogue plan queryable", "permission": "deny", "flows": ["ingress"], "messages": ["declare_queryable", "reply"],
+             "key_exprs": [f"{prefix}/plan/**"]},
+            {"id": "no rogue replies", "permission": "deny", "flows": ["ingress"], "messages": ["reply"],
+             "key_exprs": [f"{prefix}/schedule", f"{prefix}/status"]},
+        ],
+        "subjects": [{"id": "everyone"}],
+        "policies": [{"id": "service", "rules": ["service keys are the service's", "no rogue plan queryable", "no rogue replies"], "subjects": ["everyone"]}],
+    }
+
+
+def secure_defaults(conf, prefix: str):
+    """`conf` with the service's access control added when the configuration has none (a
+    configuration that enables its own access control is taken as it is)."""
+    current = json.loads(conf.get_json("access_control"))
+    if not current.get("enabled"):
+        conf.insert_json5("access_control", json.dumps(service_acl(prefix)))
+    conf.insert_json5("timestamping/enabled", "true")  # AdvancedPublisher's cache needs timestamps
     return conf

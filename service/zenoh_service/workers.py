@@ -1,0 +1,129 @@
+"""The service's computations, in worker processes.
+
+Each worker process loads its own `ScheduleEngine` (model, cut, absorber, actuator, twin) once
+and computes schedule entries. The service's own process only parses requests, answers from its
+cache and talks Zenoh: a computation holds no lock or interpreter the cached path needs, so
+cached answers never wait behind one. A worker that dies (killed, out of memory) fails the
+requests it was computing with `internal` and the pool is started again.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import threading
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from pathlib import Path
+
+from posedyn.io.json_values import json_ready
+from posedyn.io.model_dir import load_model
+from service.zenoh_service.engine import ScheduleEngine
+from service.zenoh_service.protocol import RequestError
+
+
+@dataclass(frozen=True)
+class EngineSpec:
+    """What a worker process needs to build its engine (files only: nothing heavy crosses)."""
+
+    model_dir: Path
+    cut: Path
+    absorber: Path | None = None
+    actuator: Path | None = None
+    twin: Path | None = None
+
+    def build(self) -> ScheduleEngine:
+        return ScheduleEngine(self.model_dir, self.cut, self.absorber, self.actuator, self.twin)
+
+    def model_version(self) -> str:
+        return load_model(self.model_dir).training_hash_
+
+
+_engine: ScheduleEngine | None = None
+
+
+def _start_worker(spec: EngineSpec) -> None:
+    from threadpoolctl import threadpool_limits  # noqa: PLC0415 - in the worker only
+
+    threadpool_limits(1)  # one core per worker: BLAS threads would compete with the service's process
+    global _engine
+    _engine = spec.build()
+
+
+def _pid() -> int:
+    return os.getpid()
+
+
+def entry(pose: dict, cut: dict) -> dict:
+    """The schedule entry of one pose (in a worker process)."""
+    return json_ready(_engine.entry(pose, cut))
+
+
+def check_poses(poses: list[dict], cut: dict) -> None:
+    """Workspace, reachability and cut overrides of a plan's poses, before any of them is computed."""
+    for i, pose in enumerate(poses):
+        try:
+            _engine.pose_set(pose)
+        except RequestError as exc:
+            raise RequestError(exc.code, f"poses[{i}]: {exc.message}") from None
+    _engine.config(cut)
+
+
+class WorkerPool:
+    """`workers` processes, each with its engine; `call` runs a function of this module in one."""
+
+    def __init__(self, spec: EngineSpec, workers: int):
+        self.spec, self.workers = spec, workers
+        self._executor: ProcessPoolExecutor | None = None
+        self._lock = threading.Lock()
+
+    def start(self) -> "WorkerPool":
+        """Start the processes and wait until every engine is loaded (raises if one cannot be)."""
+        with self._lock:
+            self._executor = self._new_executor()
+            executor = self._executor
+        try:
+            for future in [executor.submit(_pid) for _ in range(self.workers)]:
+                future.result()
+        except BrokenProcessPool:
+            raise RuntimeError("a worker process could not load the model (see its error above)") from None
+        return self
+
+    def call(self, function, *args):
+        with self._lock:
+            executor = self._executor
+        if executor is None:
+            raise RequestError("shutting_down", "the service is stopping")
+        try:
+            return executor.submit(function, *args).result()
+        except BrokenProcessPool:
+            self._restart(executor)
+            raise RequestError("internal", "a worker process died during the computation (it was restarted); retry") from None
+
+    def pids(self) -> list[int]:
+        with self._lock:
+            executor = self._executor
+        return sorted(getattr(executor, "_processes", None) or {})
+
+    def close(self) -> None:
+        with self._lock:
+            executor, self._executor = self._executor, None
+        if executor is not None:
+            processes = list((getattr(executor, "_processes", None) or {}).values())
+            executor.shutdown(wait=False, cancel_futures=True)
+            for process in processes:  # a computation may take seconds: stop it rather than wait
+                process.kill()
+            for process in processes:
+                process.join(5)
+
+    def _restart(self, broken: ProcessPoolExecutor) -> None:
+        with self._lock:
+            if self._executor is not broken:  # another thread restarted it already
+                return
+            self._executor = self._new_executor()
+        broken.shutdown(wait=False, cancel_futures=True)
+
+    def _new_executor(self) -> ProcessPoolExecutor:
+        # spawn: the service's process runs Zenoh's threads, which a fork would copy half-way
+        return ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"), initializer=_start_worker, initargs=(self.spec,))
