@@ -4,8 +4,9 @@
         entry = client.schedule({"x_mm": 1400, "y_mm": 0, "z_mm": 800, "beta_deg": 0})
         plan = client.plan("job-42", poses)
 
-Queries use target ALL_COMPLETE and send the time left (`timeout_ms`) so that the service answers
-`busy` rather than let the query time out; `busy` is retried with backoff (at least the
+Queries use target ALL_COMPLETE, no consolidation (every reply is seen), and send the time left
+as the selector's `timeout_ms` parameter so that the service answers `busy` rather than let the
+query time out; `busy` is retried with backoff (at least the
 service's `retry_after_ms`) while the deadline allows. Replies are checked before they are used:
 with `service_id` only that Zenoh session's replies count, with `signing_key` only replies whose
 HMAC verifies, and in any case replies from more than one source are refused
@@ -92,12 +93,7 @@ class ScheduleClient:
         backoff = 0.05
         while True:
             left = deadline - time.monotonic()
-            if raw is not None:
-                payload = raw
-            elif request is None:
-                payload = None
-            else:
-                payload = json.dumps(dict(request, timeout_ms=max(1, int(1000 * left))), allow_nan=False).encode()
+            payload = raw if raw is not None else (None if request is None else json.dumps(request, allow_nan=False).encode())
             try:
                 return self._once(f"{self.prefix}/{suffix}", payload, max(left, 0.01))
             except ServiceError as exc:
@@ -110,7 +106,8 @@ class ScheduleClient:
                 backoff = min(2 * backoff, 2.0)
 
     def _once(self, key_expr: str, payload: bytes | None, timeout_s: float) -> dict:
-        replies = self.session.get(key_expr, payload=payload, target=zenoh.QueryTarget.ALL_COMPLETE, timeout=timeout_s)
+        selector = f"{key_expr}?timeout_ms={max(1, int(1000 * timeout_s))}"  # the service answers within it
+        replies = self.session.get(selector, payload=payload, target=zenoh.QueryTarget.ALL_COMPLETE, consolidation=zenoh.ConsolidationMode.NONE, timeout=timeout_s)
         good, errors, refused = [], [], []
         for reply in replies:
             replier = str(reply.replier_id.zid) if reply.replier_id is not None else None

@@ -141,40 +141,39 @@ def parse_cut(value, where: str = "cut") -> dict:
     return cut
 
 
-def parse_timeout(obj: dict) -> float | None:
-    """The querier's budget in seconds (`timeout_ms`, optional): work it cannot wait for is refused
-    `busy` at once, or dropped when its time has passed before a worker is free."""
-    if "timeout_ms" not in obj:
+def parse_timeout(value: str | None) -> float | None:
+    """The querier's budget in seconds, from the query's `timeout_ms` parameter (a selector
+    `.../schedule?timeout_ms=4000`; optional): work it cannot wait for is refused `busy` at once,
+    and it is answered before the budget runs out."""
+    if value is None:
         return None
-    value = obj["timeout_ms"]
     low, high = TIMEOUT_MS
-    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-        raise RequestError("invalid_field", f"request.timeout_ms: expected an integer from {low} to {high}, got {json.dumps(value)[:40]}")
-    return value / 1000.0
+    if not value.isdigit() or not low <= int(value) <= high:
+        raise RequestError("invalid_field", f"timeout_ms: expected an integer from {low} to {high}, got {value[:40]!r}")
+    return int(value) / 1000.0
 
 
-def parse_schedule_request(payload: bytes | None, max_bytes: int) -> tuple[dict, dict, float | None]:
-    """(pose, cut overrides, the querier's budget in s or None)."""
+def parse_schedule_request(payload: bytes | None, max_bytes: int) -> tuple[dict, dict]:
+    """(pose, cut overrides)."""
     doc = parse_json(payload, max_bytes)
-    obj = _object(doc, "request", ("pose", "cut", "timeout_ms"))
+    obj = _object(doc, "request", ("pose", "cut"))
     if "pose" not in obj:
         raise RequestError("missing_field", "request.pose: expected a pose object, got nothing")
-    return parse_pose(obj["pose"]), parse_cut(obj.get("cut")), parse_timeout(obj)
+    return parse_pose(obj["pose"]), parse_cut(obj.get("cut"))
 
 
-def parse_plan_request(payload: bytes | None, max_bytes: int, max_poses: int) -> tuple[list[dict], dict, float | None] | None:
-    """(poses, cut overrides, the querier's budget in s or None); None when there is no payload
-    (a query for a stored plan)."""
+def parse_plan_request(payload: bytes | None, max_bytes: int, max_poses: int) -> tuple[list[dict], dict] | None:
+    """(poses, cut overrides); None when there is no payload (a query for a stored plan)."""
     doc = parse_json(payload, max_bytes, required=False)
     if doc is None:
         return None
-    obj = _object(doc, "request", ("poses", "cut", "timeout_ms"))
+    obj = _object(doc, "request", ("poses", "cut"))
     poses = obj.get("poses")
     if not isinstance(poses, list) or not poses:
         raise RequestError("missing_field" if poses is None else "invalid_field", "request.poses: expected a non-empty list of pose objects")
     if len(poses) > max_poses:
         raise RequestError("payload_too_large", f"request.poses: expected at most {max_poses} poses, got {len(poses)}")
-    return [parse_pose(p, f"poses[{i}]") for i, p in enumerate(poses)], parse_cut(obj.get("cut")), parse_timeout(obj)
+    return [parse_pose(p, f"poses[{i}]") for i, p in enumerate(poses)], parse_cut(obj.get("cut"))
 
 
 def valid_plan_id(plan_id: str) -> str:

@@ -2,9 +2,10 @@
 
 Key expressions, all under `cells/{cell}/posedyn/`:
 
-- `schedule` (queryable): `{"pose": {...}, "cut": {...}, "timeout_ms": N}` -> the `posedyn
+- `schedule` (queryable; selector parameter `timeout_ms`, the querier's budget):
+  `{"pose": {...}, "cut": {...}}` -> the `posedyn
   schedule` entry plus `model_version`, `service_id`, `computed_at`, `stale_after_s`;
-- `plan/{plan_id}` (queryable, or put): `{"poses": [...], "cut": {...}, "timeout_ms": N}` -> the
+- `plan/{plan_id}` (queryable, or put): `{"poses": [...], "cut": {...}}` -> the
   plan (every entry), published whole at `schedules/{plan_id}` through an AdvancedPublisher with
   a cache (late AdvancedSubscribers with history get it) and entry by entry at
   `schedules/{plan_id}/{index}` (live); a plan that cannot be computed within the querier's
@@ -14,7 +15,8 @@ Key expressions, all under `cells/{cell}/posedyn/`:
   liveliness token at `alive`.
 
 Paths. Cached schedules are answered on the Zenoh callback thread from serialized replies (the
-pose id spliced in: no state per pose id). Computations run in worker processes (`workers`),
+pose id spliced in: no state per pose id; a request repeated byte for byte is answered without
+parsing). Computations run in worker processes (`workers`),
 fed by dispatcher threads from two bounded lanes, single schedules before plan poses. A request
 is refused `busy` with `retry_after_ms` at once when its lane is full or the expected wait is
 longer than the querier's budget (`timeout_ms`, else `default_timeout_s`); a request whose budget
@@ -46,13 +48,17 @@ from zenoh.ext import CacheConfig, declare_advanced_publisher
 
 from service.zenoh_service import keys, workers
 from service.zenoh_service.engine import canonical
-from service.zenoh_service.protocol import RequestError, parse_plan_request, parse_schedule_request, valid_plan_id
+from service.zenoh_service.protocol import RequestError, parse_plan_request, parse_schedule_request, parse_timeout, valid_plan_id
 from service.zenoh_service.session import secure_defaults
 from service.zenoh_service.signing import reply_signature, sample_signature
 from service.zenoh_service.state import SCHEMA_VERSION, PlanStore
 from service.zenoh_service.workers import EngineSpec, WorkerPool
 
 log = logging.getLogger("posedyn.service")
+
+#: Requests remembered byte for byte with their reply (<= 1 KiB each: at most ~14 MB): a cell
+#: asking the same thing again is answered without parsing, as fast as a raw echo.
+REPEATED_REQUESTS = 4096
 
 
 @dataclass(frozen=True)
@@ -189,6 +195,7 @@ class ScheduleService:
         self.counts = dict.fromkeys(("queries", "errors", "cache_hits", "computations", "busy", "expired", "dropped", "plans_published", "plans_accepted"), 0)
         self._count_lock = threading.Lock()
         self.cache = ReplyCache(settings.cache_entries)
+        self._repeated: dict[bytes, tuple[bytes, bytes | None]] = {}  # request bytes -> (reply, signature), FIFO-bounded
         self.pool = WorkerPool(spec, settings.workers)
         self.model_version = ""
         self.service_id = ""
@@ -296,12 +303,22 @@ class ScheduleService:
 
     def _on_schedule(self, query) -> bool:
         request = _payload(query)
-        pose, cut, budget_s = parse_schedule_request(request, self.settings.max_payload_bytes)
+        repeated = self._repeated.get(request) if request is not None else None
+        if repeated is not None:  # the very request answered before: no parsing, no signing
+            self._count("cache_hits")
+            query.reply(query.key_expr, repeated[0], attachment=repeated[1])
+            return False
+        pose, cut = parse_schedule_request(request, self.settings.max_payload_bytes)
+        budget_s = parse_timeout(query.parameters.get("timeout_ms"))
         key = canonical(pose, cut)
         cached = self.cache.reply(key, pose["pose_id"])
         if cached is not None:
             self._count("cache_hits")
-            self._reply(query, request, cached)
+            attachment = self._reply(query, request, cached)
+            if len(request) <= 1024:
+                self._repeated[request] = (cached, attachment)
+                while len(self._repeated) > REPEATED_REQUESTS:
+                    self._repeated.pop(next(iter(self._repeated)), None)
             return False
         now = time.monotonic()
         deadline = self._deadline(now, budget_s)
@@ -329,7 +346,8 @@ class ScheduleService:
         if request is None:
             self._reply(query, request_bytes, json.dumps(self.stored_plan(plan_id)).encode())
             return False
-        poses, cut, budget_s = request
+        poses, cut = request
+        budget_s = parse_timeout(query.parameters.get("timeout_ms"))
         now = time.monotonic()
         plan = self._accept_plan(plan_id, poses, cut)
         waiter = Waiter(self, query, request_bytes, self._deadline(now, budget_s), lambda: json.dumps(self._plan_progress(plan, "accepted")).encode())
@@ -423,7 +441,7 @@ class ScheduleService:
         if self.store is not None:
             plan, stale = self.store.read(plan_id, self.model_version)
             if plan is not None and not stale:
-                return plan
+                return dict(plan, service_id=self.service_id)  # served by this session now
             if plan is not None:
                 raise RequestError("stale_plan", f"plan {plan_id!r} was computed with model {plan['model_version'][:12]}, not the serving {self.model_version[:12]}; send its poses again")
         raise RequestError("unknown_plan", f"plan {plan_id!r}: no such plan (send its poses to compute it)")
@@ -463,6 +481,7 @@ class ScheduleService:
     def _publish(self, plan: dict) -> None:
         """The whole plan on one AdvancedPublisher (cached for late joiners), entries live; at most
         `plans_in_memory` publishers, the oldest undeclared first."""
+        plan = dict(plan, service_id=self.service_id)  # a stored plan is republished by this session
         plan_id = plan["plan_id"]
         base = f"{self.prefix}/{keys.schedules(plan_id)}"
         whole = json.dumps(plan).encode()
@@ -638,10 +657,11 @@ class ScheduleService:
 
     # --- replies ----------------------------------------------------------------------------------
 
-    def _reply(self, query, request: bytes | None, payload: bytes) -> None:
-        key_expr = str(query.key_expr)
-        attachment = reply_signature(self.signing_key, key_expr, request, payload) if self.signing_key else None
+    def _reply(self, query, request: bytes | None, payload: bytes) -> bytes | None:
+        """Reply (signed when the service has a key); returns the signature."""
+        attachment = reply_signature(self.signing_key, str(query.key_expr), request, payload) if self.signing_key else None
         query.reply(query.key_expr, payload, attachment=attachment)
+        return attachment
 
     def _reply_error(self, query, exc: RequestError) -> None:
         self._count("errors")
