@@ -98,6 +98,24 @@ def test_a_burst_of_uncached_queries_gets_answers_or_busy_never_a_timeout(servic
     assert after["computations"] - before["computations"] <= answered + svc.settings.workers + 2  # nothing much computed for nobody
 
 
+def test_a_single_query_does_not_wait_behind_a_plan(service):
+    """Item 5: while a plan of 20 new poses is computed, a new single pose is computed before the
+    plan's remaining poses (singles and plan poses have separate lanes, singles first)."""
+    svc, endpoint, _ = service
+    poses = [{"pose_id": f"lane{i}", "x_mm": 1402.0 + 1.5 * i, "y_mm": 0.0, "z_mm": 800.0, "beta_deg": 0.0} for i in range(20)]
+    with ScheduleClient("cell3", connect=[endpoint], timeout_s=30) as c:
+        c.session.put("cells/cell3/posedyn/plan/lanes", json.dumps({"poses": poses}))
+        deadline = time.monotonic() + 30
+        while svc.status()["computing"] == 0 or svc.status()["plans_pending"] == 0:
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        entry = c.schedule({"pose_id": "single", "x_mm": 1395.5, "y_mm": 0.0, "z_mm": 800.0, "beta_deg": 0.0})
+        assert entry["pose_id"] == "single"
+        assert svc.status()["plans_pending"] == 1  # the plan is still being computed
+        plan = c.plan("lanes", poses, timeout_s=120)  # busy while pending: retried until it is done
+    assert [e["pose_id"] for e in plan["entries"]] == [p["pose_id"] for p in poses]
+
+
 def test_the_wedge_attempt_ends_in_clear_errors_and_a_service_that_answers(service):
     """Item 1: plans of 1,000 poses, many of them, at once: publishers, plans in memory, plans in
     progress and plan files stay within their limits; what is over a limit is answered `busy`
@@ -116,7 +134,7 @@ def test_the_wedge_attempt_ends_in_clear_errors_and_a_service_that_answers(servi
         with lock:
             outcomes.append(outcome)
 
-    threads = [threading.Thread(target=send, args=(k,)) for k in range(10)]
+    threads = [threading.Thread(target=send, args=(k,)) for k in range(6)]
     for t in threads:
         t.start()
     singles = []
@@ -125,7 +143,7 @@ def test_the_wedge_attempt_ends_in_clear_errors_and_a_service_that_answers(servi
             singles.append(c.schedule(dict(P5, pose_id="during"))["pose_id"])
     for t in threads:
         t.join(120)
-    assert len(outcomes) == 10 and set(outcomes) <= {"done", "accepted", "busy"}, outcomes
+    assert len(outcomes) == 6 and set(outcomes) <= {"done", "accepted", "busy"}, outcomes
     assert "done" in outcomes
     assert singles and set(singles) == {"during"}
     status = svc.status()
@@ -181,9 +199,9 @@ def test_memory_stays_flat_over_100000_queries_with_unique_pose_ids(model_dir, t
                 t.join()
             return errors
 
-        assert batch(0, 20_000) == []
+        assert batch(0, 5_000) == []
         before = _rss_kb(proc.pid)
-        assert batch(20_000, 100_000) == []
+        assert batch(5_000, 100_000) == []
         after = _rss_kb(proc.pid)
         for s in sessions:
             s.close()
@@ -193,14 +211,17 @@ def test_memory_stays_flat_over_100000_queries_with_unique_pose_ids(model_dir, t
     assert after - before < 25_000, (before, after)
 
 
-def _plan_doc(model_dir: Path, endpoint: str, cell: str, state: Path) -> dict:
-    proc = serve(model_dir, state, endpoint, cell=cell)
-    try:
-        with ScheduleClient(cell, connect=[endpoint], timeout_s=60) as c:
-            return c.plan("good", [P5])
-    finally:
-        proc.send_signal(signal.SIGTERM)
-        proc.communicate(timeout=60)
+def _stored_plan(model_dir: Path, state: Path, plan_id: str, model_version: str | None = None) -> dict:
+    """A plan file as the service writes it (entries abridged to what the schema checks)."""
+    from posedyn.io.model_dir import load_model
+    from service.zenoh_service.state import SCHEMA_VERSION
+
+    version = model_version or load_model(model_dir).training_hash_
+    doc = {"schema_version": SCHEMA_VERSION, "plan_id": plan_id, "model_version": version, "service_id": "f" * 32, "published_at": "2026-12-01T00:00:00.000+00:00",
+           "cut": {}, "poses": [P5], "entries": [{"pose_id": "P5", "critical_depth_mm": 123.0, "model_version": version}]}
+    (state / "plans").mkdir(parents=True, exist_ok=True)
+    (state / "plans" / f"{plan_id}.json").write_text(json.dumps(doc))
+    return doc
 
 
 def test_bad_state_files_are_moved_aside_and_the_service_starts_clean(model_dir, tmp_path):
@@ -209,7 +230,7 @@ def test_bad_state_files_are_moved_aside_and_the_service_starts_clean(model_dir,
     SIGTERM."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     state = tmp_path / "state"
-    good = _plan_doc(model_dir, endpoint, "zombie", state)
+    good = _stored_plan(model_dir, state, "good")
     plans = state / "plans"
     (plans / "empty.json").write_text("[]")
     (plans / "cut-short.json").write_text(json.dumps(good)[:200])
@@ -244,18 +265,20 @@ def test_a_state_folder_it_cannot_use_stops_the_service_with_an_error(model_dir,
 def test_plans_of_another_model_are_recomputed_not_republished_as_current(model_dir, tmp_path):
     """Item 2: after a restart with another model, a stored plan is published again only once it
     is recomputed with the serving model."""
+    from posedyn.io.model_dir import load_model
+
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     state = tmp_path / "state"
-    old = _plan_doc(model_dir, endpoint, "models", state)
-    doc = dict(old, model_version="0" * 64, entries=[dict(e, critical_depth_mm=123.0, model_version="0" * 64) for e in old["entries"]])
-    (state / "plans" / "good.json").write_text(json.dumps(doc))
+    _stored_plan(model_dir, state, "good", model_version="0" * 64)
+    current = load_model(model_dir).training_hash_
     proc = serve(model_dir, state, endpoint, cell="models")
     try:
         got = late_subscriber(endpoint, "cells/models/posedyn/schedules/good", wait_s=30)
     finally:
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=60)
-    assert got and all(g["model_version"] == old["model_version"] for g in got)
-    assert got[-1]["entries"][0]["critical_depth_mm"] == old["entries"][0]["critical_depth_mm"]
+    assert got and all(g["model_version"] == current for g in got)
+    entry = got[-1]["entries"][0]
+    assert entry["model_version"] == current and entry["critical_depth_mm"] != 123.0 and entry["critical_depth_mm"] > 0
     assert "recomputing" in err
-    assert json.loads((state / "plans" / "good.json").read_text())["model_version"] == old["model_version"]
+    assert json.loads((state / "plans" / "good.json").read_text())["model_version"] == current

@@ -181,7 +181,7 @@ class PlanJob:
         self.outstanding = 0  # pieces of work running
         self.finishing = False
         self.failed: RequestError | None = None
-        self.waiter: Waiter | None = None  # the query waiting for the whole plan, if any
+        self.waiters: list[Waiter] = []  # the queries waiting for the whole plan
         self.doc: dict | None = None
 
 
@@ -205,7 +205,7 @@ class ScheduleService:
         self._inflight: dict[str, Job] = {}
         self._pending: dict[str, PlanJob] = {}
         self._running = 0
-        self._seconds_per_pose = 1.0  # running mean of a computation's duration (updated by each)
+        self._durations: deque[float] = deque(maxlen=32)  # the last computations' seconds
         self._plans: OrderedDict[str, tuple[dict, object]] = OrderedDict()  # plan_id -> (plan, publisher)
         self._publish_lock = threading.Lock()
         self._deadlines: list = []
@@ -248,7 +248,7 @@ class ScheduleService:
     def close(self) -> None:
         with self._cond:
             self._closing = True
-            waiting = [w for job in self._inflight.values() for w in job.waiters] + [pj.waiter for pj in self._pending.values() if pj.waiter]
+            waiting = [w for job in self._inflight.values() for w in job.waiters] + [w for pj in self._pending.values() for w in pj.waiters]
             self._lane.clear()
             self._plan_lane.clear()
             self._cond.notify_all()
@@ -349,14 +349,18 @@ class ScheduleService:
         poses, cut = request
         budget_s = parse_timeout(query.parameters.get("timeout_ms"))
         now = time.monotonic()
-        plan = self._accept_plan(plan_id, poses, cut)
+        with self._cond:
+            same = self._pending.get(plan_id)
+            if same is not None and (same.poses != poses or same.cut != cut):
+                raise self._busy(f"plan {plan_id!r} is being computed with other poses", self._expected_wait(0, self._uncached(same)))
+        plan = same or self._accept_plan(plan_id, poses, cut)  # the same plan asked again: wait for it
         waiter = Waiter(self, query, request_bytes, self._deadline(now, budget_s), lambda: json.dumps(self._plan_progress(plan, "accepted")).encode())
         with self._cond:
-            uncached = sum(not self.cache.has(k) for k in plan.keys)
             finished = plan.finishing
-            if not finished and now + self._expected_wait(len(self._lane), uncached) <= waiter.deadline:
-                plan.waiter = waiter
-        if plan.waiter is waiter:
+            waits = not finished and now + self._expected_wait(len(self._lane), self._uncached(plan)) <= waiter.deadline
+            if waits:
+                plan.waiters.append(waiter)
+        if waits:
             self._watch(waiter)
         elif not finished:
             waiter.expire()  # longer than this query can wait: "accepted" now, computed in the background
@@ -395,7 +399,7 @@ class ScheduleService:
             "model_version": self.model_version,
             "service_id": self.service_id,
             "uptime_s": round(time.monotonic() - self.started, 3),
-            "seconds_per_pose": round(self._seconds_per_pose, 4),
+            "seconds_per_pose": round(self._seconds_per_pose, 4),  # median of the last 32
             "cached_schedules": len(self.cache),
             "plans": len(self._plans),
             "limits": {f.name: getattr(self.settings, f.name) for f in fields(self.settings) if f.name != "cell"},
@@ -411,9 +415,10 @@ class ScheduleService:
             if self._closing:
                 raise RequestError("shutting_down", "the service is stopping")
             if plan_id in self._pending:
-                raise self._busy(f"plan {plan_id!r} is being computed", self._expected_wait(0, len(self._pending[plan_id].poses)))
+                raise self._busy(f"plan {plan_id!r} is being computed", self._expected_wait(0, self._uncached(self._pending[plan_id])))
             if len(self._pending) >= self.settings.pending_plans:
-                raise self._busy(f"{len(self._pending)} plans are being computed (the limit)", self._expected_wait(len(self._lane), sum(len(p.poses) for p in self._pending.values())))
+                ahead = min(self._uncached(p) for p in self._pending.values())  # a slot frees when the first is done
+                raise self._busy(f"{len(self._pending)} plans are being computed (the limit)", self._expected_wait(len(self._lane), ahead))
             plan = PlanJob(plan_id, poses, cut)
             self._pending[plan_id] = plan
             self._plan_lane.append(plan)
@@ -421,10 +426,14 @@ class ScheduleService:
         self._count("plans_accepted")
         return plan
 
+    def _uncached(self, plan: PlanJob) -> int:
+        return sum(not self.cache.has(k) for k in plan.keys)
+
     def _plan_progress(self, plan: PlanJob, state: str) -> dict:
         with self._cond:
-            done = sum(self.cache.reply(k, "") is not None for k in plan.keys)
-            wait = self._expected_wait(len(self._lane), len(plan.keys) - done)
+            left = self._uncached(plan)
+            done = len(plan.keys) - left
+            wait = self._expected_wait(len(self._lane), left)
         return {"plan_id": plan.plan_id, "state": state, "done": done, "total": len(plan.keys), "retry_after_ms": int(1000 * min(max(wait, 0.2), 30.0)),
                 "model_version": self.model_version, "service_id": self.service_id}
 
@@ -472,11 +481,12 @@ class ScheduleService:
                 plan.failed = RequestError("internal", f"{type(exc).__name__}: {exc}")
         with self._cond:
             self._pending.pop(plan.plan_id, None)
-            waiter = plan.waiter
+            waiters = list(plan.waiters)
         if plan.failed is not None:
             log.warning("plan %s failed: %s: %s", plan.plan_id, plan.failed.code, plan.failed.message)
-        if waiter is not None:
-            waiter.error(plan.failed) if plan.failed is not None else waiter.reply(json.dumps(plan.doc).encode())
+        reply = None if plan.failed is not None else json.dumps(plan.doc).encode()
+        for waiter in waiters:
+            waiter.error(plan.failed) if reply is None else waiter.reply(reply)
 
     def _publish(self, plan: dict) -> None:
         """The whole plan on one AdvancedPublisher (cached for late joiners), entries live; at most
@@ -605,7 +615,7 @@ class ScheduleService:
         self._count("computations")
         entry = self.pool.call(workers.entry, pose, cut)
         with self._cond:
-            self._seconds_per_pose += 0.3 * (time.monotonic() - start - self._seconds_per_pose)
+            self._durations.append(time.monotonic() - start)
         entry.update(model_version=self.model_version, service_id=self.service_id, computed_at=_now(), stale_after_s=self.settings.stale_after_s)
         self.cache.put(key, entry)
 
@@ -615,6 +625,14 @@ class ScheduleService:
         """When to answer at the latest: the querier's budget less a margin for the reply's trip."""
         budget = budget_s if budget_s is not None else self.settings.default_timeout_s
         return now + max(budget - max(0.05, 0.1 * budget), 0.5 * budget)
+
+    @property
+    def _seconds_per_pose(self) -> float:
+        """The median of the last computations: the first pose of a new damping value takes
+        seconds (the virtual absorber's tuning), the rest a fraction of one."""
+        with self._cond:  # re-entrant
+            durations = sorted(self._durations)
+        return durations[len(durations) // 2] if durations else 1.0
 
     def _expected_wait(self, ahead: int, poses: int = 1) -> float:
         """Seconds until `poses` computations queued behind `ahead` others are done."""
