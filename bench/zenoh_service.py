@@ -78,18 +78,22 @@ def latencies(s, key: str, payloads) -> np.ndarray:
     return np.array(out)
 
 
-def throughput(endpoint: str, key: str, payload: bytes, total: int, clients: int) -> tuple[float, int]:
+def throughput(endpoint: str, key: str, payload: bytes, total: int, clients: int) -> tuple[float, int, np.ndarray]:
+    """Queries per second of `clients` concurrent sessions, their error count and every latency."""
     sessions = [session(endpoint) for _ in range(clients)]
     errors = [0] * clients
+    times = [[] for _ in range(clients)]
     per = total // clients
 
     def run(k):
         for _ in range(per):
+            start = time.perf_counter()
             try:
                 if not ask(sessions[k], key, payload):
                     errors[k] += 1
             except Exception:  # noqa: BLE001 - counted
                 errors[k] += 1
+            times[k].append(time.perf_counter() - start)
 
     threads = [threading.Thread(target=run, args=(k,)) for k in range(clients)]
     start = time.perf_counter()
@@ -100,7 +104,7 @@ def throughput(endpoint: str, key: str, payload: bytes, total: int, clients: int
     elapsed = time.perf_counter() - start
     for s in sessions:
         s.close()
-    return per * clients / elapsed, sum(errors)
+    return per * clients / elapsed, sum(errors), np.concatenate([np.array(t) for t in times])
 
 
 def busy_latencies(endpoint: str, request: bytes, n: int) -> dict:
@@ -170,15 +174,14 @@ def main() -> None:
             print(f"  cached / echo: p50 {np.percentile(c, 50) / np.percentile(e, 50):.2f}x, p99 {np.percentile(c, 99) / np.percentile(e, 99):.2f}x  (targets: cached p50 <= 1 ms, p99 <= 10 ms)")
             rounds = []  # echo and service alternate, so that the machine's drift hits both alike
             for _ in range(args.rounds):
-                te, err_e = throughput(echo_ep, "bench/echo", request, args.queries, args.clients)
-                tc, err_c = throughput(ours_ep, "cells/bench/posedyn/schedule", request, args.queries, args.clients)
-                rounds.append((te, tc, err_e, err_c))
-            print(f"throughput, {args.clients} clients, {args.queries} queries per run, {args.rounds} alternating rounds (queries/s):")
-            for te, tc, err_e, err_c in rounds:
-                print(f"  raw echo queryable {te:8.0f}   cached schedule {tc:8.0f}   ratio {tc / te:.2f}   errors {err_e} / {err_c}")
-            ratio = float(np.median([tc / te for te, tc, _, _ in rounds]))
-            errors = sum(r[3] for r in rounds)
-            print(f"  median ratio {ratio:.2f} (target >= 0.9), errors {errors} (target 0)")
+                rounds.append((throughput(echo_ep, "bench/echo", request, args.queries, args.clients),
+                               throughput(ours_ep, "cells/bench/posedyn/schedule", request, args.queries, args.clients)))
+            print(f"{args.clients} clients at once, {args.queries} queries per run, {args.rounds} alternating rounds (queries/s; latency p50 / p99 ms):")
+            for (te, err_e, le), (tc, err_c, lc) in rounds:
+                print(f"  raw echo queryable {te:7.0f} ({np.percentile(le, 50) * 1e3:.2f} / {np.percentile(le, 99) * 1e3:.2f})   "
+                      f"cached schedule {tc:7.0f} ({np.percentile(lc, 50) * 1e3:.2f} / {np.percentile(lc, 99) * 1e3:.2f})   ratio {tc / te:.2f}   errors {err_e} / {err_c}")
+            ratio = float(np.median([c[0] / e[0] for e, c in rounds]))
+            print(f"  median ratio {ratio:.2f} (target >= 0.9), errors {sum(c[1] for _, c in rounds)} (target 0)")
             busy = busy_latencies(ours_ep, request, 2000)
             print(f"cached schedule while the worker computes new poses without pause ({busy['computed']} computed meanwhile):")
             print(f"  p50 {np.percentile(busy['cached'], 50) * 1e3:8.3f}  p99 {np.percentile(busy['cached'], 99) * 1e3:8.3f}  max {busy['cached'].max() * 1e3:8.3f} ms  (target p99 <= 2 ms)")

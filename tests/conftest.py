@@ -9,3 +9,11 @@ DATASETS = ROOT / "datasets"
 @pytest.fixture(scope="session")
 def datasets() -> Path:
     return DATASETS
+
+
+@pytest.fixture(scope="session")
+def model_dir(tmp_path_factory) -> Path:
+    """A pose model trained on seed 004's positions (the service tests use it)."""
+    from tests.zenoh_helpers import train_model
+
+    return train_model(tmp_path_factory.mktemp("model") / "hou2023")

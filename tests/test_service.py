@@ -11,31 +11,20 @@ import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 
 import pytest
 
 zenoh = pytest.importorskip("zenoh")
 
 from service.zenoh_service.client import ScheduleClient, ServiceError  # noqa: E402
-from service.zenoh_service.server import ScheduleService, ServiceSettings  # noqa: E402
 from service.zenoh_service.session import zenoh_config  # noqa: E402
-from service.zenoh_service.workers import EngineSpec  # noqa: E402
-from tests.zenoh_helpers import CUT, P5, ROOT, TWIN, certificates, free_port, late_subscriber, serve, train_model  # noqa: E402
-
-
-@pytest.fixture(scope="module")
-def model_dir(tmp_path_factory) -> Path:
-    return train_model(tmp_path_factory.mktemp("model") / "hou2023")
+from tests.zenoh_helpers import CUT, P5, ROOT, certificates, free_port, late_subscriber, serve, start_service  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def service(model_dir, tmp_path_factory):
-    port = free_port()
-    state = tmp_path_factory.mktemp("state")
-    settings = ServiceSettings("cell1", max_payload_bytes=4096, queue_size=2, workers=1)
-    svc = ScheduleService(EngineSpec(model_dir, CUT, twin=TWIN), settings, zenoh_config(None, "peer", [f"tcp/127.0.0.1:{port}"]), state).start()
-    yield svc, f"tcp/127.0.0.1:{port}"
+    svc, endpoint = start_service(model_dir, tmp_path_factory.mktemp("state"), "cell1", max_payload_bytes=4096, queue_size=2)
+    yield svc, endpoint
     svc.close()
 
 

@@ -17,26 +17,16 @@ import pytest
 zenoh = pytest.importorskip("zenoh")
 
 from service.zenoh_service.client import ScheduleClient, ServiceError  # noqa: E402
-from service.zenoh_service.server import ScheduleService, ServiceSettings  # noqa: E402
-from service.zenoh_service.session import zenoh_config  # noqa: E402
-from service.zenoh_service.workers import EngineSpec  # noqa: E402
-from tests.zenoh_helpers import CLI, CUT, P5, ROOT, TWIN, free_port, late_subscriber, serve, session, train_model  # noqa: E402
-
-
-@pytest.fixture(scope="module")
-def model_dir(tmp_path_factory) -> Path:
-    return train_model(tmp_path_factory.mktemp("model") / "hou2023")
+from tests.zenoh_helpers import CLI, CUT, P5, ROOT, free_port, late_subscriber, serve, session, start_service  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def service(model_dir, tmp_path_factory):
-    port = free_port()
     state = tmp_path_factory.mktemp("state")
-    settings = ServiceSettings("cell3", queue_size=8, plans_in_memory=3, pending_plans=2, stored_plans=4)
-    svc = ScheduleService(EngineSpec(model_dir, CUT, twin=TWIN), settings, zenoh_config(None, "peer", [f"tcp/127.0.0.1:{port}"]), state).start()
-    with ScheduleClient("cell3", connect=[f"tcp/127.0.0.1:{port}"], timeout_s=60) as c:
+    svc, endpoint = start_service(model_dir, state, "cell3", queue_size=8, plans_in_memory=3, pending_plans=2, stored_plans=4)
+    with ScheduleClient("cell3", connect=[endpoint], timeout_s=60) as c:
         c.schedule(P5)  # the first computation of a damping value tunes the virtual absorber (seconds)
-    yield svc, f"tcp/127.0.0.1:{port}", state
+    yield svc, endpoint, state
     svc.close()
 
 

@@ -17,24 +17,16 @@ import pytest
 zenoh = pytest.importorskip("zenoh")
 
 from service.zenoh_service.client import ScheduleClient, ServiceError  # noqa: E402
-from service.zenoh_service.server import ScheduleService, ServiceSettings  # noqa: E402
 from service.zenoh_service.session import zenoh_config  # noqa: E402
-from service.zenoh_service.workers import EngineSpec  # noqa: E402
-from tests.zenoh_helpers import CUT, P5, ROOT, TWIN, certificates, free_port, serve, session, train_model  # noqa: E402
+from tests.zenoh_helpers import P5, ROOT, certificates, free_port, serve, session, start_service  # noqa: E402
 
 KEY = b"k" * 16 + b"0123456789abcdef"
 FORGED = {"pose_id": "P5", "critical_depth_mm": 99.0, "service_id": "0" * 32}
 
 
 @pytest.fixture(scope="module")
-def model_dir(tmp_path_factory) -> Path:
-    return train_model(tmp_path_factory.mktemp("model") / "hou2023")
-
-
-@pytest.fixture(scope="module")
 def service(model_dir, tmp_path_factory):
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    svc = ScheduleService(EngineSpec(model_dir, CUT, twin=TWIN), ServiceSettings("cell4"), zenoh_config(None, "peer", [endpoint]), tmp_path_factory.mktemp("state"), signing_key=KEY).start()
+    svc, endpoint = start_service(model_dir, tmp_path_factory.mktemp("state"), "cell4", signing_key=KEY)
     with ScheduleClient("cell4", connect=[endpoint], timeout_s=60) as c:
         c.schedule(P5)
     yield svc, endpoint

@@ -13,7 +13,9 @@ from pathlib import Path
 
 import zenoh
 
+from service.zenoh_service.server import ScheduleService, ServiceSettings
 from service.zenoh_service.session import zenoh_config
+from service.zenoh_service.workers import EngineSpec
 
 ROOT = Path(__file__).resolve().parents[1]
 CUT = ROOT / "datasets/seeds/hou2023_cut.toml"
@@ -35,6 +37,13 @@ def train_model(folder: Path) -> Path:
 
     save_model(PoseModel(method="stgp").fit(read_modal_table(ROOT / "datasets/seeds/hou2023_positions.csv")), folder)
     return folder
+
+
+def start_service(model_dir: Path, state: Path, cell: str, signing_key: bytes | None = None, **limits) -> tuple[ScheduleService, str]:
+    """A ScheduleService in this process (an embedded peer on a free loopback port), started."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    spec = EngineSpec(model_dir, CUT, twin=TWIN)
+    return ScheduleService(spec, ServiceSettings(cell, **limits), zenoh_config(None, "peer", [endpoint]), state, signing_key=signing_key).start(), endpoint
 
 
 def serve(model_dir: Path, state: Path, endpoint: str, extra=(), cell: str = "cell2") -> subprocess.Popen:

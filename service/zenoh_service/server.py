@@ -316,9 +316,10 @@ class ScheduleService:
             self._count("cache_hits")
             attachment = self._reply(query, request, cached)
             if len(request) <= 1024:
-                self._repeated[request] = (cached, attachment)
-                while len(self._repeated) > REPEATED_REQUESTS:
-                    self._repeated.pop(next(iter(self._repeated)), None)
+                with self._count_lock:
+                    self._repeated[request] = (cached, attachment)
+                    while len(self._repeated) > REPEATED_REQUESTS:
+                        self._repeated.pop(next(iter(self._repeated)), None)
             return False
         now = time.monotonic()
         deadline = self._deadline(now, budget_s)
