@@ -1,7 +1,8 @@
 """The absorber package's parameter files: the MRF absorber (`kind = "mrf_absorber"`, as
 datasets/seeds/hou2023_mrf_absorber.toml) and the active-damping actuator (`kind =
-"active_damping"`, as datasets/seeds/sahu2024_active_damping.toml). None gives the defaults
-(seed 004's absorber, seed 000's actuator)."""
+"active_damping"`, as datasets/seeds/sahu2024_active_damping.toml), a host mode with its cut and
+uncertainty (`kind = "host_and_cut"`, as datasets/seeds/dogan2024_host_milling.toml). None gives
+the defaults (seed 004's absorber, seed 000's actuator)."""
 
 from __future__ import annotations
 
@@ -9,7 +10,10 @@ import os
 
 from absorber.active_damping import Actuator, ControlConfig
 from absorber.mrf import MRFAbsorber
+from absorber.robust import HostUncertainty
+from absorber.tuning import Host
 from posedyn.io.params import read_params, reading
+from posedyn.stability.cutting import Cut
 
 
 def read_absorber(path: str | os.PathLike | None) -> MRFAbsorber:
@@ -45,3 +49,16 @@ def read_actuator(path: str | os.PathLike | None) -> ControlConfig:
         )
         control = p.get("control", {})
         return ControlConfig(actuator=actuator, **{k: control[k] for k in ("mount_axis", "disturbance_n", "margin_db", "virtual_layout", "virtual_mass_ratio") if k in control})
+
+
+def read_host(path: str | os.PathLike) -> tuple[HostUncertainty, Cut, float | None]:
+    """The `[host]` mode, its `[uncertainty]` (relative standard deviations; seed 002 Table 3's
+    when absent), the `[cut]` and the `[absorber] mass_ratio` (None when absent) of a host file."""
+    p = read_params(path)
+    with reading(path, "host file"):
+        h, c, u = p["host"], p["cut"], p.get("uncertainty", {})
+        host = Host(fn_hz=float(h["fn_hz"]), k_n_per_m=float(h["k_n_per_m"]), zeta=float(h["zeta"]))
+        uncertainty = HostUncertainty(host, **{k: float(u[k]) for k in ("k_rel_std", "fn_rel_std", "zeta_rel_std") if k in u})
+        cut = Cut(teeth=int(c["teeth"]), kt_pa=float(c["kt_n_per_m2"]), kn_pa=float(c["kr_n_per_m2"]), radial_immersion=float(c["radial_immersion"]), milling=c.get("milling", "down"))
+        mass_ratio = p.get("absorber", {}).get("mass_ratio")
+        return uncertainty, cut, None if mass_ratio is None else float(mass_ratio)

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import differential_evolution, minimize_scalar
@@ -112,8 +113,10 @@ def uncontrolled_min_real_part(zeta_m: float) -> float:
     return -1.0 / (4.0 * zeta_m * (1.0 + zeta_m))
 
 
+@lru_cache(maxsize=64)
 def tune_sims(layout: str, mass_ratio: float, zeta_m: float, seed: int = 0) -> Tuning:
-    """Maximise min Re G~ over the layout's parameters (seed 002 eq. 18)."""
+    """Maximise min Re G~ over the layout's parameters (seed 002 eq. 18); deterministic for a
+    seed, so kept per process (a differential evolution takes seconds)."""
     check_choice("layout", layout, LAYOUTS)
     check_positive("mass_ratio", mass_ratio)
     names = ["gamma", "zeta_a"] + ([] if layout == "tmd" else ["delta", "eta"])

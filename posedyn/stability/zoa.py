@@ -49,13 +49,37 @@ def branches(dyn: ToolTipDynamics, cut: Cut, omega_rad_s: np.ndarray | None = No
     w = frequency_grid(dyn) if omega_rad_s is None else np.asarray(omega_rad_s, dtype=float)
     rotated = dyn.rotated(np.deg2rad(cut.feed_angle_deg))
     nu = _track(np.linalg.eigvals(rotated.frf(w) @ mean_force_matrix(cut)))  # (len, 2)
+    return branches_from_eigenvalues(w, nu.T)
+
+
+def branches_from_eigenvalues(omega_rad_s: np.ndarray, nu: np.ndarray) -> ZoaBranches:
+    """The branches of eigenvalues nu(w) of G(i w) H0, shape (..., len(omega)): any leading
+    dimensions (branches, samples) are kept. For a structure flexible in one direction y only,
+    nu = G_yy(i w) H0_yy (seed 002 eq. 12)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         ww = -1.0 / nu
     ok = np.isfinite(ww) & (ww.real > 0)
     kappa = np.where(ok, ww.imag / np.where(ok, ww.real, 1.0), 0.0)
     depth = np.where(ok, ww.real * (1.0 + kappa**2) / 2.0, np.nan)
     phase = np.pi - 2.0 * np.arctan(kappa)
-    return ZoaBranches(w, depth.T, phase.T)
+    return ZoaBranches(np.asarray(omega_rad_s, dtype=float), depth, phase)
+
+
+def depth_at_speed(b: ZoaBranches, teeth: int, rpm: float) -> np.ndarray:
+    """Critical depth (m) at one spindle speed of every branch set in `b` (leading dimensions
+    of b.depth_m but the last two, e.g. Monte Carlo samples): where a lobe k passes the speed,
+    w tau = phase(w) + 2 pi k with tau = 60 / (N rpm), the depth interpolated there, the least
+    over lobes and branches; inf where no lobe passes."""
+    tau = 60.0 / (teeth * rpm)
+    h = (b.omega_rad_s * tau - b.phase_rad) / (2.0 * np.pi)  # an integer k >= 0 where lobe k passes
+    d0, d1 = b.depth_m[..., :-1], b.depth_m[..., 1:]
+    h0, h1 = h[..., :-1], h[..., 1:]
+    k = np.ceil(np.minimum(h0, h1))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = (k - h0) / (h1 - h0)
+        cross = np.isfinite(d0) & np.isfinite(d1) & (k >= 0) & (k <= np.maximum(h0, h1)) & (h1 != h0)
+        depth = np.where(cross, d0 + t * (d1 - d0), np.inf)
+    return depth.min(axis=(-2, -1))
 
 
 def _track(nu: np.ndarray) -> np.ndarray:
@@ -90,39 +114,7 @@ def absolute_limit_m(dyn: ToolTipDynamics, cut: Cut) -> float:
     return float(b.depth_m[branch, index])
 
 
-def lobes(dyn: ToolTipDynamics, cut: Cut, rpm: np.ndarray, max_lobes: int = 200) -> np.ndarray:
+def lobes(dyn: ToolTipDynamics, cut: Cut, rpm: np.ndarray) -> np.ndarray:
     """Critical depth (m) at each spindle speed: the lower envelope of all lobes and branches."""
-    rpm = np.asarray(rpm, dtype=float)
     b = branches(dyn, cut)
-    out = np.full(rpm.shape, np.inf)
-    for depth, phase in zip(b.depth_m, b.phase_rad):
-        for k in range(max_lobes):
-            tau = (phase + 2.0 * np.pi * k) / b.omega_rad_s
-            lobe_rpm = 60.0 / (cut.teeth * tau)
-            reach = np.where(np.isfinite(depth), lobe_rpm, np.nan)
-            if not np.isfinite(reach).any() or np.nanmax(reach) < rpm.min():
-                break
-            if np.nanmin(reach) > rpm.max():
-                continue
-            for segment in _monotonic_segments(lobe_rpm, depth):
-                x, y = lobe_rpm[segment], depth[segment]
-                order = np.argsort(x)
-                x, y = x[order], y[order]
-                inside = (rpm >= x[0]) & (rpm <= x[-1])
-                if inside.any():
-                    out[inside] = np.minimum(out[inside], np.interp(rpm[inside], x, y))
-    return out
-
-
-def _monotonic_segments(x: np.ndarray, y: np.ndarray):
-    """Slices over which x is strictly monotonic and x, y are finite (lobe pieces to interpolate)."""
-    finite = np.isfinite(x) & np.isfinite(y)
-    d = np.diff(x)
-    good = finite[:-1] & finite[1:] & (d != 0)
-    direction = np.sign(d)
-    starts = good.copy()
-    starts[1:] &= ~good[:-1] | (direction[1:] != direction[:-1])
-    ends = good.copy()
-    ends[:-1] &= ~good[1:] | (direction[1:] != direction[:-1])
-    for first, last in zip(np.flatnonzero(starts), np.flatnonzero(ends)):
-        yield slice(first, last + 2)
+    return np.array([depth_at_speed(b, cut.teeth, r) for r in np.ravel(rpm)]).reshape(np.shape(rpm))

@@ -7,11 +7,13 @@ from enum import Enum
 from pathlib import Path
 from typing import Optional
 
+import numpy as np
 import typer
 from rich.table import Table
 
 from absorber.chain import ScheduleConfig, schedule_entries
-from absorber.files import read_absorber, read_actuator
+from absorber.files import read_absorber, read_actuator, read_host
+from absorber.robust import monte_carlo_limits
 from absorber.tuning import Host, absolute_limit_m, min_real_part, tune_sims, uncontrolled_min_real_part
 from posedyn.errors import InputError
 from posedyn.io.atomic import write_text_atomic
@@ -71,6 +73,41 @@ def tune(
         return
     for key, value in out.items():
         console.print(f"{key:24s} {value}")
+
+
+@app.command("robust")
+def robust(
+    host_file: Path = typer.Option(..., "--host", help="Host file: [host], [cut], optional [uncertainty] and [absorber] mass_ratio (as datasets/seeds/dogan2024_host_milling.toml)."),
+    layout: Optional[Layout] = typer.Option(None, "--layout", help="Absorber tuned (seed 002 eq. 18) for the nominal host; none: the bare host."),
+    mass_ratio: Optional[float] = typer.Option(None, "--mass-ratio", help="Absorber mass / host modal mass (default: the host file's)."),
+    rpm_min: float = typer.Option(..., "--rpm-min"),
+    rpm_max: float = typer.Option(..., "--rpm-max"),
+    rpm_steps: int = typer.Option(..., "--rpm-steps", min=1),
+    samples: int = typer.Option(500, "--samples", min=10),
+    seed: int = typer.Option(0, "--seed"),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Stability limit under the host's uncertainty per speed: Latin-hypercube Monte Carlo (seed 002 section 4)."""
+    uncertainty, cut, file_mass_ratio = read_host(host_file)
+    if not 0 < rpm_min <= rpm_max:
+        raise InputError("0 < --rpm-min <= --rpm-max", got=f"{rpm_min}, {rpm_max}", column="--rpm-min")
+    mu = mass_ratio if mass_ratio is not None else file_mass_ratio
+    if layout is not None and mu is None:
+        raise InputError("--mass-ratio or [absorber] mass_ratio in the host file", got="neither", file=str(host_file), column="--mass-ratio")
+    tuning = None if layout is None else tune_sims(layout.value, mu, uncertainty.nominal.zeta)
+    stats = monte_carlo_limits(uncertainty, tuning, cut, np.linspace(rpm_min, rpm_max, rpm_steps), samples, seed)
+    rows = [
+        {"rpm": float(r), "mean_mm": finite_or_none(m * 1e3), "std_mm": finite_or_none(s * 1e3), "cv_pct": finite_or_none(100 * cv),
+         "p95_lower_mm": finite_or_none(lo * 1e3), "q05_mm": finite_or_none(q * 1e3), "nominal_mm": finite_or_none(n * 1e3)}
+        for r, m, s, cv, lo, q, n in zip(stats.rpm, stats.mean_m, stats.std_m, stats.cv, stats.lower95_m, stats.q05_m, stats.nominal_m)
+    ]
+    if as_json:
+        print_json(rows)
+        return
+    table = Table("rpm", "mean mm", "std mm", "cv %", "95 % lower mm", "5 % quantile mm", "nominal mm", title=f"{layout.value if layout else 'no absorber'}, {samples} samples")
+    for row in rows:
+        table.add_row(*(_fmt(v) for v in row.values()))
+    console.print(table)
 
 
 @app.command("field")
