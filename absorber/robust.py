@@ -25,9 +25,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import minimize
 from scipy.stats import norm, qmc
 
-from absorber.tuning import Host, Tuning
+from absorber.tuning import BOUNDS, Host, Tuning
 from posedyn.errors import check_positive
 from posedyn.stability.cutting import Cut, mean_force_matrix
 from posedyn.stability.zoa import branches_from_eigenvalues, depth_at_speed
@@ -118,3 +119,30 @@ def monte_carlo_limits(uncertainty: HostUncertainty, tuning: Tuning | None, cut:
     depths = np.array([depth_at_speed(b, cut.teeth, r) for r in rpm])  # (speeds, samples)
     nominal_m = np.array([depth_at_speed(b0, cut.teeth, r)[0] for r in rpm])
     return LimitStatistics(rpm, depths.mean(axis=1), depths.std(axis=1, ddof=1), np.quantile(depths, 0.05, axis=1), nominal_m)
+
+
+def robust_tuning(uncertainty: HostUncertainty, nominal: Tuning, cut: Cut, rpm, samples: int = 250, seed: int = 0, max_evaluations: int = 80) -> Tuning:
+    """The absorber parameters that maximise the 95 % lower bound of the limit (its least over
+    the speeds `rpm`) instead of the nominal host's limit (seed 002 eq. 18), starting from the
+    nominal tuning. The same samples serve every candidate (common random numbers: the
+    objective is smooth in the parameters); Nelder-Mead on the logarithms of the layout's
+    dimensionless parameters (gamma, zeta_a, delta, eta), kept inside absorber.tuning.BOUNDS."""
+    names = ["gamma", "zeta_a"] + ([] if nominal.layout == "tmd" else ["delta", "eta"])
+    h_yy = mean_force_matrix(cut)[1, 1]
+    omega = chatter_grid(uncertainty.nominal)
+    k, fn, zeta = uncertainty.sample(samples, seed)
+    speeds = np.atleast_1d(np.asarray(rpm, dtype=float))
+
+    def make(x) -> Tuning:
+        values = {n: float(np.clip(np.exp(v), *BOUNDS[n])) for n, v in zip(names, x)}
+        return Tuning(nominal.layout, nominal.mass_ratio, values["gamma"], values["zeta_a"], values.get("delta"), values.get("eta"))
+
+    def lower_bound(tuning: Tuning) -> float:
+        b = branches_from_eigenvalues(omega, (receptance(k, fn, zeta, omega, tuning, uncertainty.nominal) * h_yy)[:, None, :])
+        depths = np.array([depth_at_speed(b, cut.teeth, r) for r in speeds])
+        return float(np.min(depths.mean(axis=1) - Z95 * depths.std(axis=1, ddof=1)))
+
+    x0 = np.log([getattr(nominal, n) for n in names])
+    result = minimize(lambda x: -lower_bound(make(x)), x0, method="Nelder-Mead", options={"maxfev": max_evaluations, "xatol": 1e-4, "fatol": 1e-9})
+    best = make(result.x)
+    return best if lower_bound(best) > lower_bound(nominal) else nominal

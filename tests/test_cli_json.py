@@ -71,6 +71,7 @@ def test_every_command_prints_strict_json_on_small_inputs(small, tmp_path):
     json_of("fit", frf, "--out", tmp_path / "fitted.csv")
     json_of("predict", small / "model", "--poses", small / "pose.csv")
     json_of("absorber", "field", "--target-hz", "20")
+    json_of("absorber", "robust", "--host", DATA / "seeds/dogan2024_host_milling.toml", "--rpm-min", "2700", "--rpm-max", "2700", "--rpm-steps", "1", "--samples", "50")
     json_of("absorber", "tune", "--host-fn-hz", "20", "--host-k-n-per-m", "5e5", "--host-zeta", "0.03", "--mass-ratio", "0.05", "--layout", "tmd", *CUT_FLAGS)
     entries = json_of("schedule", small / "model", "--poses", small / "pose.csv")  # the model's cut
     assert entries[0]["stability"]["converged"] is True

@@ -13,7 +13,7 @@ from rich.table import Table
 
 from absorber.chain import ScheduleConfig, schedule_entries
 from absorber.files import read_absorber, read_actuator, read_host
-from absorber.robust import monte_carlo_limits
+from absorber.robust import monte_carlo_limits, robust_tuning
 from absorber.tuning import Host, absolute_limit_m, min_real_part, tune_sims, uncontrolled_min_real_part
 from posedyn.errors import InputError
 from posedyn.io.atomic import write_text_atomic
@@ -85,6 +85,7 @@ def robust(
     rpm_steps: int = typer.Option(..., "--rpm-steps", min=1),
     samples: int = typer.Option(500, "--samples", min=10),
     seed: int = typer.Option(0, "--seed"),
+    robust_tuning_: bool = typer.Option(False, "--robust-tuning", help="Also tune the absorber for the best 95 % lower bound over the speeds and print its rows beside the nominal tuning's."),
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Stability limit under the host's uncertainty per speed: Latin-hypercube Monte Carlo (seed 002 section 4)."""
@@ -94,20 +95,35 @@ def robust(
     mu = mass_ratio if mass_ratio is not None else file_mass_ratio
     if layout is not None and mu is None:
         raise InputError("--mass-ratio or [absorber] mass_ratio in the host file", got="neither", file=str(host_file), column="--mass-ratio")
-    tuning = None if layout is None else tune_sims(layout.value, mu, uncertainty.nominal.zeta)
-    stats = monte_carlo_limits(uncertainty, tuning, cut, np.linspace(rpm_min, rpm_max, rpm_steps), samples, seed)
-    rows = [
-        {"rpm": float(r), "mean_mm": finite_or_none(m * 1e3), "std_mm": finite_or_none(s * 1e3), "cv_pct": finite_or_none(100 * cv),
-         "p95_lower_mm": finite_or_none(lo * 1e3), "q05_mm": finite_or_none(q * 1e3), "nominal_mm": finite_or_none(n * 1e3)}
-        for r, m, s, cv, lo, q, n in zip(stats.rpm, stats.mean_m, stats.std_m, stats.cv, stats.lower95_m, stats.q05_m, stats.nominal_m)
-    ]
+    if robust_tuning_ and layout is None:
+        raise InputError("--layout with --robust-tuning", got="no layout", column="--robust-tuning")
+    speeds = np.linspace(rpm_min, rpm_max, rpm_steps)
+    tunings = {"nominal": None if layout is None else tune_sims(layout.value, mu, uncertainty.nominal.zeta)}
+    if robust_tuning_:
+        tunings["robust"] = robust_tuning(uncertainty, tunings["nominal"], cut, speeds, seed=seed + 1)  # tuned on other samples than it is judged on
+    out = {}
+    for name, tuning in tunings.items():
+        stats = monte_carlo_limits(uncertainty, tuning, cut, speeds, samples, seed)
+        out[name] = [
+            {"rpm": float(r), "mean_mm": finite_or_none(m * 1e3), "std_mm": finite_or_none(s * 1e3), "cv_pct": finite_or_none(100 * cv),
+             "p95_lower_mm": finite_or_none(lo * 1e3), "q05_mm": finite_or_none(q * 1e3), "nominal_mm": finite_or_none(n * 1e3)}
+            for r, m, s, cv, lo, q, n in zip(stats.rpm, stats.mean_m, stats.std_m, stats.cv, stats.lower95_m, stats.q05_m, stats.nominal_m)
+        ]
     if as_json:
-        print_json(rows)
+        print_json(out["nominal"] if not robust_tuning_ else {name: {"tuning": _tuning_json(tunings[name]), "rows": rows} for name, rows in out.items()})
         return
-    table = Table("rpm", "mean mm", "std mm", "cv %", "95 % lower mm", "5 % quantile mm", "nominal mm", title=f"{layout.value if layout else 'no absorber'}, {samples} samples")
-    for row in rows:
-        table.add_row(*(_fmt(v) for v in row.values()))
-    console.print(table)
+    for name, rows in out.items():
+        title = f"{layout.value if layout else 'no absorber'} ({name} tuning {_tuning_json(tunings[name])}), {samples} samples" if layout else f"no absorber, {samples} samples"
+        table = Table("rpm", "mean mm", "std mm", "cv %", "95 % lower mm", "5 % quantile mm", "nominal mm", title=title)
+        for row in rows:
+            table.add_row(*(_fmt(v) for v in row.values()))
+        console.print(table)
+
+
+def _tuning_json(tuning) -> dict | None:
+    if tuning is None:
+        return None
+    return {k: None if getattr(tuning, k) is None else float(getattr(tuning, k)) for k in ("gamma", "zeta_a", "delta", "eta")}
 
 
 @app.command("field")
