@@ -272,3 +272,23 @@ def test_plans_of_another_model_are_recomputed_not_republished_as_current(model_
     assert entry["model_version"] == current and entry["critical_depth_mm"] != 123.0 and entry["critical_depth_mm"] > 0
     assert "recomputing" in err
     assert json.loads((state / "plans" / "good.json").read_text())["model_version"] == current
+
+
+def test_state_writes_are_durable_fsync_of_the_file_and_its_folder(tmp_path, monkeypatch):
+    """Item 6: a plan file is flushed to disk before the rename and the folder after it (a
+    rename is durable only once its folder is); a failed write leaves neither the file nor a
+    temporary behind."""
+    from posedyn.io import atomic
+
+    synced = []
+    real = os.fsync
+    monkeypatch.setattr(atomic.os, "fsync", lambda fd: (synced.append(os.readlink(f"/proc/self/fd/{fd}") if Path("/proc/self/fd").exists() else fd), real(fd)))
+    atomic.write_text_atomic(tmp_path / "plan.json", "{}\n")
+    assert (tmp_path / "plan.json").read_text() == "{}\n"
+    assert len(synced) == 2
+    if Path("/proc/self/fd").exists():
+        assert synced[0].startswith(str(tmp_path / ".plan.json.")) and synced[1] == str(tmp_path)
+    monkeypatch.setattr(atomic.os, "replace", lambda *a: (_ for _ in ()).throw(OSError("disk full")))
+    with pytest.raises(OSError):
+        atomic.write_text_atomic(tmp_path / "other.json", "{}\n")
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["plan.json"]
