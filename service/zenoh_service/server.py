@@ -59,6 +59,8 @@ log = logging.getLogger("posedyn.service")
 #: Requests remembered byte for byte with their reply (<= 1 KiB each: at most ~14 MB): a cell
 #: asking the same thing again is answered without parsing, as fast as a raw echo.
 REPEATED_REQUESTS = 4096
+#: Queries waiting for the same computation (the same pose, or the same plan), then `busy`.
+WAITERS_PER_JOB = 64
 
 
 @dataclass(frozen=True)
@@ -336,6 +338,8 @@ class ScheduleService:
                 self._inflight[key] = job
                 self._lane.append(job)
                 self._cond.notify()
+            elif len(job.waiters) >= WAITERS_PER_JOB:
+                raise self._busy(f"{len(job.waiters)} queries wait for this pose already (the limit)")
             job.waiters.append(waiter)
         self._watch(waiter)
         return True
@@ -358,7 +362,7 @@ class ScheduleService:
         waiter = Waiter(self, query, request_bytes, self._deadline(now, budget_s), lambda: json.dumps(self._plan_progress(plan, "accepted")).encode())
         with self._cond:
             finished = plan.finishing
-            waits = not finished and now + self._expected_wait(len(self._lane), self._uncached(plan)) <= waiter.deadline
+            waits = not finished and len(plan.waiters) < WAITERS_PER_JOB and now + self._expected_wait(len(self._lane), self._uncached(plan)) <= waiter.deadline
             if waits:
                 plan.waiters.append(waiter)
         if waits:
