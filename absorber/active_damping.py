@@ -286,20 +286,14 @@ def dominant_mode(modes) -> tuple[float, float, float]:
     return max(modes, key=lambda m: 1.0 / (2.0 * m[1] * m[2]))
 
 
-_VIRTUAL_CACHE: dict = {}
-
-
 def virtual_absorber(host: tuple[float, float, float], config: ControlConfig) -> dict:
     """Controller parameters that make the actuator act as a passive TMD / IDVA on the host
     mode (seed 002), tuned by max-min Re G for the host's damping (the non-dimensional optimum is
-    cached per layout, mass ratio and damping), and the largest actuator force it needs for the
-    disturbance force acting on the host."""
+    kept per layout, mass ratio and damping by tune_sims), and the largest actuator force it needs
+    for the disturbance force acting on the host."""
     fn, zeta, k = host
     design_zeta = max(round(zeta, 2), 0.005)  # tune for the damping to two decimals: one optimisation serves many poses
-    key = (config.virtual_layout, config.virtual_mass_ratio, design_zeta)
-    if key not in _VIRTUAL_CACHE:
-        _VIRTUAL_CACHE[key] = tune_sims(config.virtual_layout, config.virtual_mass_ratio, design_zeta)
-    t = _VIRTUAL_CACHE[key]
+    t = tune_sims(config.virtual_layout, config.virtual_mass_ratio, design_zeta)
     wn = 2 * math.pi * fn
     M = k / wn**2
     m = config.virtual_mass_ratio * M

@@ -6,12 +6,17 @@ the defaults (seed 004's absorber, seed 000's actuator)."""
 
 from __future__ import annotations
 
+import json
+import logging
 import os
+from pathlib import Path
 
 from absorber.active_damping import Actuator, ControlConfig
 from absorber.mrf import MRFAbsorber
 from absorber.robust import HostUncertainty
-from absorber.tuning import Host
+from absorber.tuning import Host, known_tunings, remember_tunings
+from posedyn.errors import InputError
+from posedyn.io.atomic import write_text_atomic
 from posedyn.io.params import read_params, reading
 from posedyn.stability.cutting import Cut
 
@@ -62,3 +67,39 @@ def read_host(path: str | os.PathLike) -> tuple[HostUncertainty, Cut, float | No
         cut = Cut(teeth=int(c["teeth"]), kt_pa=float(c["kt_n_per_m2"]), kn_pa=float(c["kr_n_per_m2"]), radial_immersion=float(c["radial_immersion"]), milling=c.get("milling", "down"))
         mass_ratio = p.get("absorber", {}).get("mass_ratio")
         return uncertainty, cut, None if mass_ratio is None else float(mass_ratio)
+
+
+#: Where absorber optima are kept between runs: $POSEDYN_CACHE_DIR, else ~/.cache/posedyn.
+CACHE_ENV = "POSEDYN_CACHE_DIR"
+TUNINGS_SCHEMA = 1
+
+
+def tuning_cache_path() -> Path:
+    return Path(os.environ.get(CACHE_ENV) or Path.home() / ".cache" / "posedyn") / "absorber_tunings.json"
+
+
+def load_tuning_cache(path: Path | None = None) -> int:
+    """Remember the optima a previous run kept (each costs a differential evolution of seconds);
+    a missing file is nothing, an unreadable one is ignored with a warning (it is a cache)."""
+    path = path or tuning_cache_path()
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        if doc.get("schema_version") != TUNINGS_SCHEMA:
+            raise ValueError(f"schema_version {doc.get('schema_version')!r}, expected {TUNINGS_SCHEMA}")
+        return remember_tunings(doc["tunings"])
+    except FileNotFoundError:
+        return 0
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, InputError) as exc:
+        logging.getLogger("posedyn").warning("absorber tuning cache %s ignored: %s", path, exc)
+        return 0
+
+
+def save_tuning_cache(path: Path | None = None) -> None:
+    """Keep this process's optima with those already in the file (atomic write; best effort)."""
+    path = path or tuning_cache_path()
+    load_tuning_cache(path)  # another process may have added some meanwhile
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_text_atomic(path, json.dumps({"schema_version": TUNINGS_SCHEMA, "tunings": known_tunings()}, indent=1) + "\n")
+    except OSError as exc:
+        logging.getLogger("posedyn").warning("absorber tuning cache %s not written: %s", path, exc)

@@ -34,8 +34,7 @@ Tuning policies:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from functools import lru_cache
+from dataclasses import asdict, dataclass
 
 import numpy as np
 from scipy.optimize import differential_evolution, minimize_scalar
@@ -113,12 +112,42 @@ def uncontrolled_min_real_part(zeta_m: float) -> float:
     return -1.0 / (4.0 * zeta_m * (1.0 + zeta_m))
 
 
-@lru_cache(maxsize=64)
+_TUNED: dict[tuple, Tuning] = {}  # (layout, mass_ratio, zeta_m, seed) -> the optimum
+
+
 def tune_sims(layout: str, mass_ratio: float, zeta_m: float, seed: int = 0) -> Tuning:
-    """Maximise min Re G~ over the layout's parameters (seed 002 eq. 18); deterministic for a
-    seed, so kept per process (a differential evolution takes seconds)."""
+    """Maximise min Re G~ over the layout's parameters (seed 002 eq. 18). Deterministic for a
+    seed, so each optimum is kept (`known_tunings`, `remember_tunings`: a differential evolution
+    takes seconds; the service keeps them across restarts)."""
     check_choice("layout", layout, LAYOUTS)
     check_positive("mass_ratio", mass_ratio)
+    key = (layout, float(mass_ratio), float(zeta_m), int(seed))
+    if key not in _TUNED:
+        _TUNED[key] = _differential_evolution(layout, mass_ratio, zeta_m, seed)
+    return _TUNED[key]
+
+
+def known_tunings() -> list[dict]:
+    """Every optimum computed or remembered in this process, as JSON-ready rows."""
+    return [{"zeta_m": z, "seed": seed, **{k: v for k, v in asdict(t).items()}} for (_, _, z, seed), t in list(_TUNED.items())]
+
+
+def remember_tunings(rows: list[dict]) -> int:
+    """Take optima computed elsewhere (rows of `known_tunings`); returns how many were new.
+    A row that does not describe a tuning raises ValueError / KeyError / TypeError."""
+    new = 0
+    for row in rows:
+        tuning = Tuning(str(row["layout"]), float(row["mass_ratio"]), float(row["gamma"]), float(row["zeta_a"]),
+                        None if row["delta"] is None else float(row["delta"]), None if row["eta"] is None else float(row["eta"]))
+        check_choice("layout", tuning.layout, LAYOUTS)
+        key = (tuning.layout, tuning.mass_ratio, float(row["zeta_m"]), int(row["seed"]))
+        if key not in _TUNED:
+            _TUNED[key] = tuning
+            new += 1
+    return new
+
+
+def _differential_evolution(layout: str, mass_ratio: float, zeta_m: float, seed: int) -> Tuning:
     names = ["gamma", "zeta_a"] + ([] if layout == "tmd" else ["delta", "eta"])
     grid = np.concatenate([np.linspace(0.3, 0.85, 400), np.linspace(0.85, 1.15, 3000), np.linspace(1.15, 2.0, 400)])
 

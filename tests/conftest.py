@@ -1,8 +1,12 @@
+import os
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+# absorber optima shared by this run's processes (workers, CLI and service subprocesses), kept
+# out of the user's own cache
+os.environ.setdefault("POSEDYN_CACHE_DIR", str(ROOT / "build" / "test-cache"))
 DATASETS = ROOT / "datasets"
 
 

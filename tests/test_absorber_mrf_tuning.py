@@ -176,3 +176,24 @@ def test_robust_tuning_raises_the_guaranteed_depth_where_the_host_is_uncertain(d
     guaranteed = {name: min(r["p95_lower_mm"] for r in part["rows"]) for name, part in doc.items()}
     assert guaranteed["robust"] > 1.2 * guaranteed["nominal"]
     assert min(r["nominal_mm"] for r in robust["rows"]) < min(r["nominal_mm"] for r in nominal["rows"])  # the price: less nominal depth
+
+
+def test_the_tuning_cache_round_trips_exactly_and_a_bad_file_is_ignored(tmp_path, caplog):
+    """Optima kept between runs come back bit for bit (JSON floats round-trip), so a run with the
+    cache gives the same schedules as one without; a corrupt cache is ignored with a warning."""
+    from absorber import tuning
+    from absorber.files import load_tuning_cache, save_tuning_cache
+
+    computed = tune_sims("tmd", 0.0123, 0.021)
+    path = tmp_path / "tunings.json"
+    save_tuning_cache(path)
+    saved = dict(tuning._TUNED)
+    tuning._TUNED.clear()
+    try:
+        assert load_tuning_cache(path) == len(saved)
+        assert tune_sims("tmd", 0.0123, 0.021) == computed  # from the file, not recomputed
+        assert tuning._TUNED == saved
+    finally:
+        tuning._TUNED.update(saved)
+    path.write_text('{"schema_version": 1, "tunings": [{"layout": "nonsense"}]}')
+    assert load_tuning_cache(path) == 0 and "ignored" in caplog.text

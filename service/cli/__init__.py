@@ -13,6 +13,8 @@ from typing import Optional
 
 import typer
 
+from absorber.files import load_tuning_cache, save_tuning_cache
+from absorber.tuning import known_tunings
 from posedyn import __version__
 from posedyn.errors import InputError
 from service.cli import absorber, control, data, fit, gap, posemodel, serve, sle, stability, sweep, twin
@@ -55,8 +57,13 @@ def _root(
 
 
 def main(argv: Optional[list[str]] = None) -> None:
+    load_tuning_cache()  # absorber optima of earlier runs (seconds each to recompute)
+    known = len(known_tunings())
     try:
         app(args=argv, prog_name="posedyn")
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         sys.exit(2)
+    finally:
+        if len(known_tunings()) > known:
+            save_tuning_cache()

@@ -17,6 +17,8 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 
+from absorber.files import load_tuning_cache, save_tuning_cache
+from absorber.tuning import known_tunings
 from posedyn.io.json_values import json_ready
 from posedyn.io.model_dir import load_model
 from service.zenoh_service.engine import ScheduleEngine
@@ -49,6 +51,7 @@ def _start_worker(spec: EngineSpec) -> None:
     threadpool_limits(1)  # one core per worker: BLAS threads would compete with the service's process
     global _engine
     _engine = spec.build()
+    load_tuning_cache()  # the virtual absorber's optima of earlier runs: seconds each otherwise
 
 
 def _pid() -> int:
@@ -57,7 +60,11 @@ def _pid() -> int:
 
 def entry(pose: dict, cut: dict) -> dict:
     """The schedule entry of one pose (in a worker process)."""
-    return json_ready(_engine.entry(pose, cut))
+    known = len(known_tunings())
+    out = json_ready(_engine.entry(pose, cut))
+    if len(known_tunings()) > known:
+        save_tuning_cache()
+    return out
 
 
 def check_poses(poses: list[dict], cut: dict) -> None:
