@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from absorber.chain import PoseModes, ScheduleConfig, coupled, schedule_poses, table_pose_modes
-from absorber.files import read_absorber, read_actuator
+from absorber.files import load_tuning_cache, read_absorber, read_actuator, save_tuning_cache
+from absorber.tuning import known_tunings
 from posedyn.errors import InputError
 from posedyn.io.cut import read_cut, read_sle_cut
 from posedyn.io.model_dir import load_model
@@ -49,6 +50,7 @@ class SweepContext:
 @lru_cache(maxsize=4)
 def context(spec_json: str, grid_twin: str | None = None) -> SweepContext:
     spec = SweepSpec(**json.loads(spec_json))
+    load_tuning_cache()  # once per worker process: the virtual absorber's optima of earlier runs
     cut, rpm, _ = read_cut(spec.cut)
     control = read_actuator(Path(spec.actuator) if spec.actuator else None)
     schedule = ScheduleConfig(cut, rpm, read_absorber(spec.absorber), control=control, policy=spec.policy, steps=spec.steps, absolute_limits=False)
@@ -107,6 +109,7 @@ def _model_modes(ctx: SweepContext, poses: PoseSet, index: list[int]) -> dict[in
 def compute_chunk(spec_json: str, poses: PoseSet, grid_twin: str | None = None) -> list[dict]:
     """Result rows (dicts, `RESULT_COLUMNS` plus pose and mode columns) for a PoseSet."""
     ctx = context(spec_json, grid_twin)
+    known = len(known_tunings())
     index = list(range(len(poses)))
     found = pose_modes_of(ctx, poses, index)
     rows = poses.records()
@@ -119,6 +122,8 @@ def compute_chunk(spec_json: str, poses: PoseSet, grid_twin: str | None = None) 
         rows[i].update(_result_columns(result))
         if ctx.sle_cut is not None:
             rows[i]["sle_um"] = float(sle_m(found[i].dyn, ctx.sle_cut, ctx.schedule.rpm)[0]) * 1e6
+    if len(known_tunings()) > known:
+        save_tuning_cache()
     return rows
 
 
