@@ -29,7 +29,7 @@ from scipy.optimize import minimize
 from scipy.stats import norm, qmc
 
 from absorber.tuning import BOUNDS, Host, Tuning
-from posedyn.errors import check_positive
+from posedyn.errors import InputError, check_positive
 from posedyn.stability.cutting import Cut, mean_force_matrix
 from posedyn.stability.zoa import branches_from_eigenvalues, depth_at_speed
 
@@ -51,7 +51,7 @@ class HostUncertainty:
         for name in ("k_rel_std", "fn_rel_std", "zeta_rel_std"):
             value = getattr(self, name)
             if not 0.0 <= value < 0.5:
-                raise ValueError(f"{name}: expected a relative standard deviation in [0, 0.5), got {value}")
+                raise InputError("a relative standard deviation in [0, 0.5)", got=value, column=name)
 
     def sample(self, n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(k_n_per_m, fn_hz, zeta) of n Latin-hypercube samples; draws beyond 4.5 std, which

@@ -57,9 +57,9 @@ def reading(path: str | os.PathLike, what: str):
     where = dict(file=str(Path(path)))
     try:
         yield
+    except InputError as exc:  # first: an InputError is a ValueError too
+        raise exc.located(**where) from None
     except KeyError as exc:
         raise InputError(f"this key in the {what}", got="missing", column=str(exc.args[0]), **where) from None
     except (TypeError, ValueError) as exc:
         raise InputError(f"numbers in the {what}", got=str(exc), **where) from None
-    except InputError as exc:
-        raise exc.located(**where) from None
