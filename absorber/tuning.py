@@ -129,7 +129,7 @@ def tune_sims(layout: str, mass_ratio: float, zeta_m: float, seed: int = 0) -> T
 
 def known_tunings() -> list[dict]:
     """Every optimum computed or remembered in this process, as JSON-ready rows."""
-    return [{"zeta_m": z, "seed": seed, **{k: v for k, v in asdict(t).items()}} for (_, _, z, seed), t in list(_TUNED.items())]
+    return [{"zeta_m": z, "seed": seed, **asdict(t)} for (_, _, z, seed), t in list(_TUNED.items())]
 
 
 def remember_tunings(rows: list[dict]) -> int:

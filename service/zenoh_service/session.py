@@ -29,24 +29,21 @@ def zenoh_config(config_file: Path | None = None, mode: str | None = None, liste
 
 def service_acl(prefix: str) -> dict:
     """Access control that keeps the service's own keys its own, whoever connects: no remote put
-    or delete on its results (`schedules/**`), no remote queryable, liveliness token or
-    publication on any of its keys (a rogue `schedule` queryable or `alive` token is not routed);
-    everything else allowed. Zenoh filters what arrives from other sessions (ingress), so the
+    or delete on its results (`schedules/**`), no remote queryable, liveliness token or reply on
+    its endpoints (`schedule`, `plan/*`, `status`, `alive`: a rogue queryable or token is not
+    routed); everything else allowed. Zenoh filters what arrives from other sessions (ingress), so the
     service's own publications and replies pass."""
     return {
         "enabled": True,
         "default_permission": "allow",
         "rules": [
-            {"id": "service keys are the service's", "permission": "deny", "flows": ["ingress"],
-             "messages": ["put", "delete", "declare_queryable", "liveliness_token"],
-             "key_exprs": [f"{prefix}/schedules/**", f"{prefix}/schedule", f"{prefix}/status", f"{prefix}/alive"]},
-            {"id": "no rogue plan queryable", "permission": "deny", "flows": ["ingress"], "messages": ["declare_queryable", "reply"],
-             "key_exprs": [f"{prefix}/plan/**"]},
-            {"id": "no rogue replies", "permission": "deny", "flows": ["ingress"], "messages": ["reply"],
-             "key_exprs": [f"{prefix}/schedule", f"{prefix}/status"]},
+            {"id": "results are the service's", "permission": "deny", "flows": ["ingress"], "messages": ["put", "delete"],
+             "key_exprs": [f"{prefix}/schedules/**"]},
+            {"id": "endpoints are the service's", "permission": "deny", "flows": ["ingress"], "messages": ["declare_queryable", "liveliness_token", "reply"],
+             "key_exprs": [f"{prefix}/schedule", f"{prefix}/plan/**", f"{prefix}/status", f"{prefix}/alive"]},
         ],
         "subjects": [{"id": "everyone"}],
-        "policies": [{"id": "service", "rules": ["service keys are the service's", "no rogue plan queryable", "no rogue replies"], "subjects": ["everyone"]}],
+        "policies": [{"id": "service", "rules": ["results are the service's", "endpoints are the service's"], "subjects": ["everyone"]}],
     }
 
 
