@@ -9,13 +9,14 @@ from __future__ import annotations
 import json
 import logging
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 from absorber.active_damping import Actuator, ControlConfig
 from absorber.mrf import MRFAbsorber
 from absorber.robust import HostUncertainty
 from absorber.tuning import Host, known_tunings, remember_tunings
-from posedyn.errors import InputError
+from posedyn.errors import InputError, check_positive
 from posedyn.io.atomic import write_text_atomic
 from posedyn.io.params import read_params, reading
 from posedyn.stability.cutting import Cut
@@ -56,9 +57,22 @@ def read_actuator(path: str | os.PathLike | None) -> ControlConfig:
         return ControlConfig(actuator=actuator, **{k: control[k] for k in ("mount_axis", "disturbance_n", "margin_db", "virtual_layout", "virtual_mass_ratio") if k in control})
 
 
-def read_host(path: str | os.PathLike) -> tuple[HostUncertainty, Cut, float | None]:
+@dataclass(frozen=True)
+class HostCase:
+    """A host file: the host mode and its uncertainty, the cut, the absorber's mass ratio, the
+    feed per tooth and the actuator's force limit (None where the file has none)."""
+
+    uncertainty: HostUncertainty
+    cut: Cut
+    mass_ratio: float | None = None
+    feed_per_tooth_m: float | None = None
+    force_limit_n: float | None = None
+
+
+def read_host(path: str | os.PathLike) -> HostCase:
     """The `[host]` mode, its `[uncertainty]` (relative standard deviations; seed 002 Table 3's
-    when absent), the `[cut]` and the `[absorber] mass_ratio` (None when absent) of a host file."""
+    when absent), the `[cut]` (with its optional feed_per_tooth_mm), `[absorber] mass_ratio` and
+    `[actuator] force_limit_n` of a host file."""
     p = read_params(path)
     with reading(path, "host file"):
         h, c, u = p["host"], p["cut"], p.get("uncertainty", {})
@@ -66,7 +80,13 @@ def read_host(path: str | os.PathLike) -> tuple[HostUncertainty, Cut, float | No
         uncertainty = HostUncertainty(host, **{k: float(u[k]) for k in ("k_rel_std", "fn_rel_std", "zeta_rel_std") if k in u})
         cut = Cut(teeth=int(c["teeth"]), kt_pa=float(c["kt_n_per_m2"]), kn_pa=float(c["kr_n_per_m2"]), radial_immersion=float(c["radial_immersion"]), milling=c.get("milling", "down"))
         mass_ratio = p.get("absorber", {}).get("mass_ratio")
-        return uncertainty, cut, None if mass_ratio is None else float(mass_ratio)
+        feed = c.get("feed_per_tooth_mm")
+        limit = p.get("actuator", {}).get("force_limit_n")
+        for name, value in (("feed_per_tooth_mm", feed), ("force_limit_n", limit), ("mass_ratio", mass_ratio)):
+            if value is not None:
+                check_positive(name, float(value))
+        return HostCase(uncertainty, cut, None if mass_ratio is None else float(mass_ratio),
+                        None if feed is None else float(feed) * 1e-3, None if limit is None else float(limit))
 
 
 #: Where absorber optima are kept between runs: $POSEDYN_CACHE_DIR, else ~/.cache/posedyn.

@@ -17,6 +17,12 @@ Per speed: mean, std, coefficient of variation, the lower bound of the 95 % inte
 mean - 1.96 std (seed 002 Figs. 7-8, the normal interval the seed draws; floored at 0, a depth
 nobody can count on) and the empirical 5 % quantile (the honest figure where the distribution
 is skewed, near lobe peaks).
+
+The actuator force of a virtual absorber (seed 002 section 5): F_a / F of eq. 20 at the
+harmonics of the tooth-passing frequency, times the harmonics of the steady cutting force at the
+guaranteed depth, summed (a bound on the force's peak); per speed the upper end of its 95 %
+interval over the samples and its ratio to the nominal host's (the seed's Fig. 12: about 1.5x in
+the absolute-stability region, up to 2.5x in the lobing region).
 """
 
 from __future__ import annotations
@@ -30,7 +36,7 @@ from scipy.stats import norm, qmc
 
 from absorber.tuning import BOUNDS, Host, Tuning
 from posedyn.errors import InputError, check_positive
-from posedyn.stability.cutting import Cut, mean_force_matrix
+from posedyn.stability.cutting import Cut, force_matrix, mean_force_matrix
 from posedyn.stability.zoa import branches_from_eigenvalues, depth_at_speed
 
 #: Two-sided 95 % normal interval: mean -+ 1.96 std.
@@ -71,32 +77,65 @@ def chatter_grid(host: Host, points: int = 1500) -> np.ndarray:
     return np.unique(np.concatenate([np.geomspace(0.3 * w0, 3.0 * w0, points // 3), np.linspace(0.6 * w0, 1.6 * w0, points)]))
 
 
-def receptance(k: np.ndarray, fn: np.ndarray, zeta: np.ndarray, omega: np.ndarray, tuning: Tuning | None, nominal: Host) -> np.ndarray:
-    """G(i w) (m/N) of hosts (k, fn, zeta), shape (samples, len(omega)), with the absorber tuned
-    for `nominal` (None: no absorber)."""
+def _host_and_absorber(k, fn, zeta, omega, tuning: Tuning | None, nominal: Host):
+    """(s, host dynamic stiffness M s^2 + C s + K, the absorber's dynamic stiffness
+    m s^2 Z / (m s^2 + Z) or 0), shapes (samples, len(omega))."""
     k, fn, zeta = (np.asarray(v, dtype=float)[:, None] for v in (k, fn, zeta))
     wn = 2.0 * math.pi * fn
     mass = k / wn**2
     s = 1j * np.asarray(omega, dtype=float)[None, :]
-    dyn = mass * s**2 + 2.0 * zeta * np.sqrt(k * mass) * s + k
-    if tuning is not None:
-        w0 = 2.0 * math.pi * nominal.fn_hz
-        scale = nominal.mass_kg * w0**2  # Z = M0 w0^2 Z~(s / w0)
-        z = scale * tuning.impedance(s / w0)
-        m = tuning.mass_ratio * nominal.mass_kg
-        dyn = dyn + m * s**2 * z / (m * s**2 + z)
-    return 1.0 / dyn
+    host = mass * s**2 + 2.0 * zeta * np.sqrt(k * mass) * s + k
+    if tuning is None:
+        return s, host, np.zeros_like(host)
+    w0 = 2.0 * math.pi * nominal.fn_hz
+    z = nominal.mass_kg * w0**2 * tuning.impedance(s / w0)  # Z = M0 w0^2 Z~(s / w0)
+    m = tuning.mass_ratio * nominal.mass_kg
+    return s, host, m * s**2 * z / (m * s**2 + z)
+
+
+def receptance(k: np.ndarray, fn: np.ndarray, zeta: np.ndarray, omega: np.ndarray, tuning: Tuning | None, nominal: Host) -> np.ndarray:
+    """G(i w) (m/N) of hosts (k, fn, zeta), shape (samples, len(omega)), with the absorber tuned
+    for `nominal` (None: no absorber)."""
+    _, host, absorber = _host_and_absorber(k, fn, zeta, omega, tuning, nominal)
+    return 1.0 / (host + absorber)
+
+
+def actuator_force_frf(k: np.ndarray, fn: np.ndarray, zeta: np.ndarray, omega: np.ndarray, tuning: Tuning, nominal: Host) -> np.ndarray:
+    """F_a / F (i w), the force the (virtual) absorber applies to the host per unit cutting force
+    (seed 002 eq. 20), shape (samples, len(omega)):
+
+        F_a / F = -L m s^2 / ((M s^2 + C s + K + L)(m s^2 + L) - L^2) = -(m s^2 L / (m s^2 + L)) G,
+
+    the absorber's dynamic stiffness times the host's displacement (L = Z, the layout's
+    impedance)."""
+    _, host, absorber = _host_and_absorber(k, fn, zeta, omega, tuning, nominal)
+    return -absorber / (host + absorber)
+
+
+def cutting_force_harmonics(cut: Cut, feed_per_tooth_m: float, harmonics: int = 64) -> np.ndarray:
+    """Single-sided amplitudes (N per m of depth) of the harmonics k = 1..`harmonics` of the
+    tooth-passing frequency in the steady y cutting force, straight flutes: F = a H(phi) (f_t, 0)
+    (the chip h = f_t sin phi of a feed f_t along x; posedyn.stability.cutting's H)."""
+    check_positive("feed_per_tooth_m", feed_per_tooth_m)
+    samples = max(4096, 8 * harmonics)
+    phi = np.arange(samples) * (2.0 * math.pi / cut.teeth) / samples
+    force = feed_per_tooth_m * force_matrix(cut, phi)[:, 1, 0]
+    return 2.0 * np.abs(np.fft.rfft(force)[1 : harmonics + 1]) / samples
 
 
 @dataclass(frozen=True)
 class LimitStatistics:
-    """Stability limit statistics at each spindle speed (depths in m)."""
+    """Stability limit statistics at each spindle speed (depths in m), and the actuator force
+    per m of depth (N/m: the upper end of its 95 % interval over the samples and the nominal
+    host's; NaN without an absorber or a feed) summed over the tooth-passing harmonics."""
 
     rpm: np.ndarray
     mean_m: np.ndarray
     std_m: np.ndarray
     q05_m: np.ndarray
     nominal_m: np.ndarray
+    force_upper95_n_per_m: np.ndarray
+    force_nominal_n_per_m: np.ndarray
 
     @property
     def cv(self) -> np.ndarray:
@@ -106,9 +145,29 @@ class LimitStatistics:
     def lower95_m(self) -> np.ndarray:
         return np.maximum(self.mean_m - Z95 * self.std_m, 0.0)
 
+    @property
+    def force_upper95_n(self) -> np.ndarray:
+        """The actuator force (N, peak bound) the uncertainty can demand when cutting at the
+        guaranteed depth: the upper end of its 95 % interval (seed 002 Fig. 12)."""
+        return self.force_upper95_n_per_m * self.lower95_m
 
-def monte_carlo_limits(uncertainty: HostUncertainty, tuning: Tuning | None, cut: Cut, rpm, samples: int = 500, seed: int = 0) -> LimitStatistics:
-    """The stability limit of every sample at every speed, summarised per speed."""
+    @property
+    def force_ratio(self) -> np.ndarray:
+        """That force over the nominal host's at the same depth (seed 002 Fig. 12's F_a / F_a,ideal)."""
+        return self.force_upper95_n_per_m / self.force_nominal_n_per_m
+
+
+def _force_per_depth(k, fn, zeta, tuning: Tuning, nominal: Host, teeth: int, rpm: float, harmonics: np.ndarray) -> np.ndarray:
+    """sum_k |F_a / F (i k w_T)| |F_k| per m of depth for every sample: a bound on the peak of the
+    steady actuator force (the static force's k = 0 term gives none: F_a / F (0) = 0)."""
+    omega = 2.0 * math.pi * rpm / 60.0 * teeth * np.arange(1, len(harmonics) + 1)
+    return np.abs(actuator_force_frf(k, fn, zeta, omega, tuning, nominal)) @ harmonics
+
+
+def monte_carlo_limits(uncertainty: HostUncertainty, tuning: Tuning | None, cut: Cut, rpm, samples: int = 500, seed: int = 0,
+                       force_harmonics: np.ndarray | None = None) -> LimitStatistics:
+    """The stability limit of every sample at every speed, summarised per speed; with an absorber
+    and the cut's force harmonics (`cutting_force_harmonics`), the actuator force too."""
     h_yy = mean_force_matrix(cut)[1, 1]
     nominal = uncertainty.nominal
     omega = chatter_grid(nominal)
@@ -118,31 +177,48 @@ def monte_carlo_limits(uncertainty: HostUncertainty, tuning: Tuning | None, cut:
     rpm = np.atleast_1d(np.asarray(rpm, dtype=float))
     depths = np.array([depth_at_speed(b, cut.teeth, r) for r in rpm])  # (speeds, samples)
     nominal_m = np.array([depth_at_speed(b0, cut.teeth, r)[0] for r in rpm])
-    return LimitStatistics(rpm, depths.mean(axis=1), depths.std(axis=1, ddof=1), np.quantile(depths, 0.05, axis=1), nominal_m)
+    force_upper, force_nominal = np.full(len(rpm), np.nan), np.full(len(rpm), np.nan)
+    if tuning is not None and force_harmonics is not None:
+        for i, r in enumerate(rpm):
+            per_sample = _force_per_depth(k, fn, zeta, tuning, nominal, cut.teeth, r, force_harmonics)
+            force_upper[i] = per_sample.mean() + Z95 * per_sample.std(ddof=1)
+            force_nominal[i] = _force_per_depth([nominal.k_n_per_m], [nominal.fn_hz], [nominal.zeta], tuning, nominal, cut.teeth, r, force_harmonics)[0]
+    return LimitStatistics(rpm, depths.mean(axis=1), depths.std(axis=1, ddof=1), np.quantile(depths, 0.05, axis=1), nominal_m, force_upper, force_nominal)
 
 
-def robust_tuning(uncertainty: HostUncertainty, nominal: Tuning, cut: Cut, rpm, samples: int = 250, seed: int = 0, max_evaluations: int = 80) -> Tuning:
+def robust_tuning(uncertainty: HostUncertainty, nominal: Tuning, cut: Cut, rpm, samples: int = 250, seed: int = 0, max_evaluations: int = 80,
+                  force_harmonics: np.ndarray | None = None, force_limit_n: float | None = None) -> Tuning:
     """The absorber parameters that maximise the 95 % lower bound of the limit (its least over
     the speeds `rpm`) instead of the nominal host's limit (seed 002 eq. 18), starting from the
-    nominal tuning. The same samples serve every candidate (common random numbers: the
-    objective is smooth in the parameters); Nelder-Mead on the logarithms of the layout's
-    dimensionless parameters (gamma, zeta_a, delta, eta), kept inside absorber.tuning.BOUNDS."""
+    nominal tuning. With an actuator force limit F_max (and the cut's force harmonics), the depth
+    counted at a speed is min(lower bound, F_max / F95), F95 the upper end of the 95 % interval
+    of the actuator force per m of depth: the depth the actuator can also deliver without
+    saturating (seed 002 section 5). The same samples serve every candidate (common random
+    numbers: the objective is smooth in the parameters); Nelder-Mead on the logarithms of the
+    layout's dimensionless parameters (gamma, zeta_a, delta, eta), kept inside
+    absorber.tuning.BOUNDS."""
     names = ["gamma", "zeta_a"] + ([] if nominal.layout == "tmd" else ["delta", "eta"])
     h_yy = mean_force_matrix(cut)[1, 1]
     omega = chatter_grid(uncertainty.nominal)
     k, fn, zeta = uncertainty.sample(samples, seed)
     speeds = np.atleast_1d(np.asarray(rpm, dtype=float))
+    limited = force_limit_n is not None and force_harmonics is not None
 
     def make(x) -> Tuning:
         values = {n: float(np.clip(np.exp(v), *BOUNDS[n])) for n, v in zip(names, x)}
         return Tuning(nominal.layout, nominal.mass_ratio, values["gamma"], values["zeta_a"], values.get("delta"), values.get("eta"))
 
-    def lower_bound(tuning: Tuning) -> float:
+    def guaranteed(tuning: Tuning) -> float:
         b = branches_from_eigenvalues(omega, (receptance(k, fn, zeta, omega, tuning, uncertainty.nominal) * h_yy)[:, None, :])
         depths = np.array([depth_at_speed(b, cut.teeth, r) for r in speeds])
-        return float(np.min(depths.mean(axis=1) - Z95 * depths.std(axis=1, ddof=1)))
+        lower = depths.mean(axis=1) - Z95 * depths.std(axis=1, ddof=1)
+        if limited:
+            for i, r in enumerate(speeds):
+                per_m = _force_per_depth(k, fn, zeta, tuning, uncertainty.nominal, cut.teeth, r, force_harmonics)
+                lower[i] = min(lower[i], force_limit_n / (per_m.mean() + Z95 * per_m.std(ddof=1)))
+        return float(np.min(lower))
 
     x0 = np.log([getattr(nominal, n) for n in names])
-    result = minimize(lambda x: -lower_bound(make(x)), x0, method="Nelder-Mead", options={"maxfev": max_evaluations, "xatol": 1e-4, "fatol": 1e-9})
+    result = minimize(lambda x: -guaranteed(make(x)), x0, method="Nelder-Mead", options={"maxfev": max_evaluations, "xatol": 1e-4, "fatol": 1e-9})
     best = make(result.x)
-    return best if lower_bound(best) > lower_bound(nominal) else nominal
+    return best if guaranteed(best) > guaranteed(nominal) else nominal

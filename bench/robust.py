@@ -30,7 +30,8 @@ def best_of(runs: int, function) -> tuple[float, object]:
 
 
 def main() -> None:
-    uncertainty, cut, mu = read_host(DATASETS / "seeds/dogan2024_host_milling.toml")
+    case = read_host(DATASETS / "seeds/dogan2024_host_milling.toml")
+    uncertainty, cut, mu = case.uncertainty, case.cut, case.mass_ratio
     print(f"seed 002 host, mu = {mu}, 2700 rpm, 500 samples (best of 3):")
     for layout, seed_cv in (("tmd", 13.8), ("idva-c6", 10.2)):
         tuned = tune_sims(layout, mu, uncertainty.nominal.zeta)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from enum import Enum
 from pathlib import Path
 from typing import Optional
@@ -13,7 +14,7 @@ from rich.table import Table
 
 from absorber.chain import ScheduleConfig, schedule_entries
 from absorber.files import read_absorber, read_actuator, read_host
-from absorber.robust import monte_carlo_limits, robust_tuning
+from absorber.robust import cutting_force_harmonics, monte_carlo_limits, robust_tuning
 from absorber.tuning import Host, absolute_limit_m, min_real_part, tune_sims, uncontrolled_min_real_part
 from posedyn.errors import InputError
 from posedyn.io.atomic import write_text_atomic
@@ -89,32 +90,37 @@ def robust(
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Stability limit under the host's uncertainty per speed: Latin-hypercube Monte Carlo (seed 002 section 4)."""
-    uncertainty, cut, file_mass_ratio = read_host(host_file)
+    case = read_host(host_file)
+    uncertainty, cut = case.uncertainty, case.cut
     if not 0 < rpm_min <= rpm_max:
         raise InputError("0 < --rpm-min <= --rpm-max", got=f"{rpm_min}, {rpm_max}", column="--rpm-min")
-    mu = mass_ratio if mass_ratio is not None else file_mass_ratio
+    mu = mass_ratio if mass_ratio is not None else case.mass_ratio
     if layout is not None and mu is None:
         raise InputError("--mass-ratio or [absorber] mass_ratio in the host file", got="neither", file=str(host_file), column="--mass-ratio")
     if robust_tuning_ and layout is None:
         raise InputError("--layout with --robust-tuning", got="no layout", column="--robust-tuning")
     speeds = np.linspace(rpm_min, rpm_max, rpm_steps)
+    harmonics = None if case.feed_per_tooth_m is None else cutting_force_harmonics(cut, case.feed_per_tooth_m)
     tunings = {"nominal": None if layout is None else tune_sims(layout.value, mu, uncertainty.nominal.zeta)}
-    if robust_tuning_:
-        tunings["robust"] = robust_tuning(uncertainty, tunings["nominal"], cut, speeds, seed=seed + 1)  # tuned on other samples than it is judged on
+    if robust_tuning_:  # tuned on other samples than it is judged on
+        tunings["robust"] = robust_tuning(uncertainty, tunings["nominal"], cut, speeds, seed=seed + 1, force_harmonics=harmonics, force_limit_n=case.force_limit_n)
     out = {}
     for name, tuning in tunings.items():
-        stats = monte_carlo_limits(uncertainty, tuning, cut, speeds, samples, seed)
+        stats = monte_carlo_limits(uncertainty, tuning, cut, speeds, samples, seed, force_harmonics=harmonics)
         out[name] = [
             {"rpm": float(r), "mean_mm": finite_or_none(m * 1e3), "std_mm": finite_or_none(s * 1e3), "cv_pct": finite_or_none(100 * cv),
-             "p95_lower_mm": finite_or_none(lo * 1e3), "q05_mm": finite_or_none(q * 1e3), "nominal_mm": finite_or_none(n * 1e3)}
-            for r, m, s, cv, lo, q, n in zip(stats.rpm, stats.mean_m, stats.std_m, stats.cv, stats.lower95_m, stats.q05_m, stats.nominal_m)
+             "p95_lower_mm": finite_or_none(lo * 1e3), "q05_mm": finite_or_none(q * 1e3), "nominal_mm": finite_or_none(n * 1e3),
+             "actuator_force_p95_n": finite_or_none(f), "actuator_force_ratio": finite_or_none(ratio),
+             "actuator_saturates": None if case.force_limit_n is None or not math.isfinite(f) else bool(f > case.force_limit_n)}
+            for r, m, s, cv, lo, q, n, f, ratio in zip(stats.rpm, stats.mean_m, stats.std_m, stats.cv, stats.lower95_m, stats.q05_m, stats.nominal_m,
+                                                       stats.force_upper95_n, stats.force_ratio)
         ]
     if as_json:
         print_json(out["nominal"] if not robust_tuning_ else {name: {"tuning": _tuning_json(tunings[name]), "rows": rows} for name, rows in out.items()})
         return
     for name, rows in out.items():
         title = f"{layout.value if layout else 'no absorber'} ({name} tuning {_tuning_json(tunings[name])}), {samples} samples" if layout else f"no absorber, {samples} samples"
-        table = Table("rpm", "mean mm", "std mm", "cv %", "95 % lower mm", "5 % quantile mm", "nominal mm", title=title)
+        table = Table("rpm", "mean mm", "std mm", "cv %", "95 % lower mm", "5 % quantile mm", "nominal mm", "actuator force 95 % N", "force / ideal", "saturates", title=title)
         for row in rows:
             table.add_row(*(_fmt(v) for v in row.values()))
         console.print(table)
@@ -184,7 +190,9 @@ def schedule(
 
 
 def _fmt(value):
-    return "-" if value is None else f"{value:.3g}"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    return "-" if value is None else f"{value:.4g}"
 
 
 def _write_json(path: Path, value) -> None:
