@@ -30,11 +30,13 @@ from absorber.active_damping import ControlConfig, controller_entry
 from absorber.coil import Coil
 from absorber.coupling import with_absorber
 from absorber.mrf import FieldSetting, MRFAbsorber
+from absorber.robust import Z95
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.errors import InputError, check_choice
 from posedyn.robot import pose_rotation
 from posedyn.stability import Cut, StabilityResult, critical_points, zoa
 from posedyn.table import ModalTable
+from posedyn.uncertainty import ModalDistribution, distributions_from_table
 
 POLICIES = ("match", "sims")
 
@@ -52,6 +54,8 @@ class ScheduleConfig:
     steps: int | None = None  # expert override: semi-discretization steps instead of the converged engine
     directions: tuple[str, ...] = ("x", "y")
     absolute_limits: bool = True  # the zeroth-order absolute limits (0.4-0.8 s a structure; sweeps skip them)
+    robust_samples: int = 0  # > 0: the guaranteed depth over that many samples of each pose's modes (`robust_entries`)
+    robust_seed: int = 0
 
     def __post_init__(self):
         check_choice("policy", self.policy, POLICIES)
@@ -59,6 +63,8 @@ class ScheduleConfig:
             raise InputError("a spindle speed > 0 rpm", got=self.rpm, column="rpm")
         if self.steps is not None and (not isinstance(self.steps, int) or self.steps < 4):
             raise InputError("an integer number of steps >= 4 (or none: the converged engine)", got=self.steps, column="steps")
+        if not isinstance(self.robust_samples, int) or isinstance(self.robust_samples, bool) or not (self.robust_samples == 0 or 8 <= self.robust_samples <= 2000):
+            raise InputError("robust samples 0 (off) or 8-2000", got=self.robust_samples, column="robust_samples")
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,6 +76,7 @@ class PoseModes:
     dyn: ToolTipDynamics
     rows: tuple
     rotation: np.ndarray
+    distribution: ModalDistribution | None = None  # the modes' uncertainty (None: unknown)
 
     @property
     def lowest_xy(self) -> tuple:
@@ -87,6 +94,35 @@ class AbsorberEntry:
     field_t_interval: tuple[float, float]
 
 
+@dataclass(frozen=True)
+class RobustEntry:
+    """The depth a cell can count on at a pose (seed 002 section 4 with the pose's own
+    uncertainty): over samples of its modes, the lower end of the 95 % interval of the critical
+    depth, mean - 1.96 std floored at 0, bare and with the absorber; the absorber setting is the
+    nominal one or the robust one, whichever guarantees more."""
+
+    samples: int
+    depth_p95_m: float
+    depth_cv: float
+    tuning: str  # "nominal" or "robust"
+    absorber: AbsorberEntry  # the setting that gives depth_with_absorber_p95_m
+    depth_with_absorber_p95_m: float
+    nominal_with_absorber_p95_m: float  # with the nominal setting, for comparison
+    converged: bool  # every sample's stability result converged
+
+    def to_json(self) -> dict:
+        return {
+            "samples": self.samples,
+            "critical_depth_p95_mm": _mm(self.depth_p95_m),
+            "critical_depth_cv_pct": 100 * self.depth_cv if math.isfinite(self.depth_cv) else None,
+            "tuning": self.tuning,
+            "absorber": _absorber_json(self.absorber),
+            "critical_depth_with_absorber_p95_mm": _mm(self.depth_with_absorber_p95_m),
+            "nominal_tuning_with_absorber_p95_mm": _mm(self.nominal_with_absorber_p95_m),
+            "converged": self.converged,
+        }
+
+
 @dataclass(frozen=True, eq=False)
 class PoseSchedule:
     """The chain's result for one pose (SI units; `to_json` gives the schedule entry)."""
@@ -101,21 +137,14 @@ class PoseSchedule:
     absolute_limit_m: float  # NaN where the config skips the absolute limits
     absolute_limit_with_absorber_m: float
     controller: dict | None  # None: no robot mode below 500 Hz in the actuator's direction
+    robust: RobustEntry | None = None  # None: not asked, or the pose's uncertainty is unknown
 
     def to_json(self) -> dict:
-        a = self.absorber
-        return {
+        out = {
             "pose_id": self.pose.pose_id,
             "critical_depth_mm": _mm(self.critical_depth_m),
             "dominant_chatter_hz": self.dominant_chatter_hz,
-            "absorber": {
-                "policy": a.policy,
-                "target_hz": a.target_hz,
-                "field_mt": a.field_t * 1e3,
-                "current_a": a.current_a if math.isfinite(a.current_a) else None,
-                "feasible": a.feasible,
-                "field_mt_interval": [b * 1e3 for b in a.field_t_interval],
-            },
+            "absorber": _absorber_json(self.absorber),
             "critical_depth_with_absorber_mm": _mm(self.critical_depth_with_absorber_m),
             "absolute_limit_mm": _mm(self.absolute_limit_m),
             "absolute_limit_with_absorber_mm": _mm(self.absolute_limit_with_absorber_m),
@@ -124,14 +153,31 @@ class PoseSchedule:
             "modes": [{"direction": d, "mode": m, "fn_hz": fn, "zeta": z, "k_n_per_m": k} for d, m, fn, z, k, _ in self.pose.rows],
             "controller": self.controller,
         }
+        if self.robust is not None:
+            out["robust"] = self.robust.to_json()
+        return out
 
 
 def _mm(depth_m: float):
     return depth_m * 1e3 if math.isfinite(depth_m) else None
 
 
-def table_pose_modes(table: ModalTable) -> list[PoseModes]:
-    """The PoseModes of every pose of a modal table (std_fn_hz 0 where the table has none)."""
+def _absorber_json(a: AbsorberEntry) -> dict:
+    return {
+        "policy": a.policy,
+        "target_hz": a.target_hz,
+        "field_mt": a.field_t * 1e3,
+        "current_a": a.current_a if math.isfinite(a.current_a) else None,
+        "feasible": a.feasible,
+        "field_mt_interval": [b * 1e3 for b in a.field_t_interval],
+    }
+
+
+def table_pose_modes(table: ModalTable, distributions: list[ModalDistribution] | None = None) -> list[PoseModes]:
+    """The PoseModes of every pose of a modal table (std_fn_hz 0 where the table has none), with
+    each pose's distribution where given (a pose model's `predict_distributions`, or
+    `posedyn.uncertainty.distributions_from_table`)."""
+    distributions = distributions if distributions is not None else [None] * len(table.poses)
     std = table.std.get("std_fn_hz")
     out = []
     for p, pose_id in enumerate(table.poses.pose_id):
@@ -140,7 +186,7 @@ def table_pose_modes(table: ModalTable) -> list[PoseModes]:
              float(std[i]) if std is not None and np.isfinite(std[i]) else 0.0)
             for i in np.flatnonzero(table.pose_index == p)
         )
-        out.append(PoseModes(pose_id, ToolTipDynamics.from_table(table, pose_id), rows, pose_rotation(table.poses, p)))
+        out.append(PoseModes(pose_id, ToolTipDynamics.from_table(table, pose_id), rows, pose_rotation(table.poses, p), distributions[p]))
     return out
 
 
@@ -173,14 +219,17 @@ def absorber_setting(dyn: ToolTipDynamics, config: ScheduleConfig, chatter_hz: f
     """(target Hz, FieldSetting, coil current A or NaN, feasible): the policy's target, the
     field that tunes the absorber to it (clamped to its range) and whether the coil can give it."""
     target = chatter_hz if config.policy == "match" else sims_target_hz(dyn, config, chatter_hz)
-    setting = config.absorber.field_for_frequency(target, clamp=True)
-    feasible = setting.feasible
+    return (target, *coil_setting(target, config))
+
+
+def coil_setting(target_hz: float, config: ScheduleConfig) -> tuple[FieldSetting, float, bool]:
+    """(FieldSetting, coil current A or NaN, feasible) that tune the absorber to a target."""
+    setting = config.absorber.field_for_frequency(target_hz, clamp=True)
     try:
         current = config.coil.current_for_field(setting.field_t)
-        feasible = feasible and current <= config.coil.max_current_a
+        return setting, current, bool(setting.feasible and current <= config.coil.max_current_a)
     except InputError:
-        current, feasible = float("nan"), False
-    return target, setting, current, bool(feasible)
+        return setting, float("nan"), False
 
 
 def schedule_poses(poses: list[PoseModes], config: ScheduleConfig) -> list[PoseSchedule]:
@@ -203,8 +252,9 @@ def schedule_poses(poses: list[PoseModes], config: ScheduleConfig) -> list[PoseS
         entries.append((depth, chatter_hz, AbsorberEntry(config.policy, target, setting.field_t, current, feasible, interval)))
         structures.append(coupled(pose.dyn, config, setting.field_t))
     with_absorber = critical_points(structures, config.cut, config.rpm, config.steps, frequencies=False)
+    robust = robust_entries(poses, [e[1] for e in entries], [e[2] for e in entries], config) if config.robust_samples else [None] * len(poses)
     out = []
-    for pose, (depth, chatter_hz, absorber), structure, result, result_with in zip(poses, entries, structures, bare, with_absorber):
+    for pose, (depth, chatter_hz, absorber), structure, result, result_with, guaranteed in zip(poses, entries, structures, bare, with_absorber, robust):
         out.append(PoseSchedule(
             pose=pose,
             critical_depth_m=depth,
@@ -216,10 +266,106 @@ def schedule_poses(poses: list[PoseModes], config: ScheduleConfig) -> list[PoseS
             absolute_limit_m=zoa.absolute_limit_m(pose.dyn, config.cut) if config.absolute_limits else math.nan,
             absolute_limit_with_absorber_m=zoa.absolute_limit_m(structure, config.cut) if config.absolute_limits else math.nan,
             controller=controller_entry(pose.pose_id, pose.rows, pose.rotation, config.control),
+            robust=guaranteed,
         ))
     return out
 
 
-def schedule_entries(table: ModalTable, config: ScheduleConfig) -> list[dict]:
-    """The `posedyn schedule` entry (JSON-ready) of every pose of a modal table."""
-    return [s.to_json() for s in schedule_poses(table_pose_modes(table), config)]
+#: Absorber targets tried by the robust search: this many across the band target x exp(+-2.5 s)
+#: (s: the ln-std of the chatter mode's frequency); below s = 0.1 % the pose is taken as certain.
+ROBUST_CANDIDATES = 9
+CERTAIN_REL_STD = 1e-3
+
+
+def lower95(depths_m: np.ndarray) -> tuple[float, float]:
+    """(mean - 1.96 std floored at 0, std / mean) of sampled depths (seed 002's 95 % interval);
+    inf if every sample never chatters, NaN if fewer than half have a finite depth."""
+    depths_m = np.asarray(depths_m, dtype=float)
+    finite = depths_m[np.isfinite(depths_m)]
+    if np.all(np.isposinf(depths_m)):
+        return math.inf, 0.0
+    if len(finite) < max(2, len(depths_m) / 2):
+        return math.nan, math.nan
+    mean, std = float(finite.mean()), float(finite.std(ddof=1))
+    return max(mean - Z95 * std, 0.0), std / mean
+
+
+def robust_entries(poses: list[PoseModes], chatter_hz: list[float], nominal: list[AbsorberEntry], config: ScheduleConfig) -> list[RobustEntry | None]:
+    """The guaranteed depth of every pose with a distribution (None for the others).
+
+    n = config.robust_samples Latin-hypercube samples of the pose's modes, the same for every
+    setting (common random numbers), each through the converged engine: bare, and with the
+    absorber at the nominal field. The robust target is screened with the zeroth-order depth at
+    the speed (cheap; `zoa.depth_at_speed` on the absorber band) over ROBUST_CANDIDATES targets
+    across the chatter mode's uncertainty, on a second set of samples; the best candidate is then
+    judged by the engine on the first set and kept only if it guarantees more than the nominal
+    setting there."""
+    n, seed = config.robust_samples, config.robust_seed
+    todo = [i for i, p in enumerate(poses) if p.distribution is not None]
+    samples = {i: poses[i].distribution.sample_dynamics(n, seed) for i in todo}
+    bare = _depths([d for i in todo for d in samples[i]], config)
+    nominal_coupled = _depths([coupled(d, config, nominal[i].field_t) for i in todo for d in samples[i]], config)
+    # screened on other samples than those it is judged on: the choice is not fitted to its judges
+    candidates = {i: _robust_candidate(poses[i], poses[i].distribution.sample_dynamics(n, seed + 1), chatter_hz[i], nominal[i], config) for i in todo}
+    judged = [i for i in todo if candidates[i] is not None]
+    robust_coupled = _depths([coupled(d, config, candidates[i].field_t) for i in judged for d in samples[i]], config)
+    out: list[RobustEntry | None] = [None] * len(poses)
+    for k, i in enumerate(todo):
+        part = slice(k * n, (k + 1) * n)
+        depth_p95, cv = lower95(bare[0][part])
+        nominal_p95, _ = lower95(nominal_coupled[0][part])
+        ok = bool(bare[1][part].all() and nominal_coupled[1][part].all())
+        tuning, entry, best = "nominal", nominal[i], nominal_p95
+        if i in judged:
+            mine = slice(judged.index(i) * n, (judged.index(i) + 1) * n)
+            robust_p95, _ = lower95(robust_coupled[0][mine])
+            if robust_p95 > nominal_p95:
+                tuning, entry, best, ok = "robust", candidates[i], robust_p95, ok and bool(robust_coupled[1][mine].all())
+        out[i] = RobustEntry(n, depth_p95, cv, tuning, entry, best, nominal_p95, ok)
+    return out
+
+
+def _depths(structures: list[ToolTipDynamics], config: ScheduleConfig) -> tuple[np.ndarray, np.ndarray]:
+    """(critical depths m, converged flags) of sampled structures at the config's cut and speed.
+    Not re-verified at the answer's resolution (`critical_points(verify=False)`: 2x the cost bare,
+    13x with the absorber coupled); the nominal structure's result, verified, is the entry's."""
+    results = critical_points(structures, config.cut, config.rpm, config.steps, frequencies=False, verify=False)
+    return np.array([r.depth_m for r in results]), np.array([r.converged is not False for r in results])
+
+
+def _robust_candidate(pose: PoseModes, samples: list[ToolTipDynamics], chatter_hz: float, nominal: AbsorberEntry, config: ScheduleConfig) -> AbsorberEntry | None:
+    """The absorber setting whose zeroth-order 95 % lower bound over the samples is largest,
+    among targets across the chatter mode's uncertainty; None where the nominal one is best or
+    the mode's frequency is certain."""
+    dist = pose.distribution
+    fn = dist.table.fn_hz
+    row = int(np.argmin(np.abs(np.log(fn / chatter_hz))))
+    s = float(dist.log_std[row, 0])
+    if s < CERTAIN_REL_STD:
+        return None
+    lo, hi = config.absorber.range_hz
+    targets = np.unique(np.clip(nominal.target_hz * np.exp(np.linspace(-2.5 * s, 2.5 * s, ROBUST_CANDIDATES)), lo, hi))
+    band = np.geomspace(0.5 * min(targets.min(), chatter_hz), 2.0 * max(targets.max(), chatter_hz), 800) * 2.0 * math.pi
+
+    def guaranteed(target: float) -> float:
+        field_t = config.absorber.field_for_frequency(target, clamp=True).field_t
+        depths = [zoa.depth_at_speed(zoa.branches(coupled(d, config, field_t), config.cut, band), config.cut.teeth, config.rpm) for d in samples]
+        return lower95(np.array(depths, dtype=float))[0]
+
+    base = guaranteed(nominal.target_hz)
+    scores = [guaranteed(t) for t in targets]
+    best = int(np.nanargmax(scores)) if np.isfinite(scores).any() else None
+    if best is None or not scores[best] > base * 1.001:
+        return None
+    target = float(targets[best])
+    setting, current, feasible = coil_setting(target, config)
+    return AbsorberEntry("robust", target, setting.field_t, current, feasible, (setting.field_t, setting.field_t))
+
+
+def schedule_entries(table: ModalTable, config: ScheduleConfig, distributions: list[ModalDistribution] | None = None) -> list[dict]:
+    """The `posedyn schedule` entry (JSON-ready) of every pose of a modal table; with robust
+    samples, the poses' distributions are the given ones (a pose model's) or the table's std
+    columns'."""
+    if config.robust_samples and distributions is None:
+        distributions = distributions_from_table(table)
+    return [s.to_json() for s in schedule_poses(table_pose_modes(table, distributions), config)]

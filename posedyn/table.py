@@ -23,7 +23,8 @@ DIRECTIONS = ("x", "y", "z")
 POSITION_COLUMNS = ("x_mm", "y_mm", "z_mm")
 ORIENTATION_COLUMNS = {"abc": ("a_deg", "b_deg", "c_deg"), "beta": ("beta_deg",)}
 JOINT_COLUMNS = tuple(f"q{j}_deg" for j in range(1, 7))
-STD_COLUMNS = ("std_fn_hz", "std_zeta", "std_k_n_per_m")
+MODAL_PARAMS = ("fn_hz", "zeta", "k_n_per_m")  # the positive parameters of a mode row
+STD_COLUMNS = tuple("std_" + name for name in MODAL_PARAMS)
 #: Optional cross-coupling: on an x row, the modal stiffness of the x response to a y force of
 #: the same mode (H_xy = 1 / (k_xy (1 - r^2 + 2 i zeta r))); on a y row, k_yx. Signed; empty
 #: where a mode is not coupled. A mode number with cross terms on both its x and y rows is one

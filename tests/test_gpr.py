@@ -92,6 +92,33 @@ def test_fast_prediction_matches_the_dense_posterior_to_1e_9():
     assert np.array_equal(predictor.predict(Xs), mean)  # without the std, the same means
 
 
+def test_predictive_covariance_between_tasks_matches_the_dense_posterior():
+    """`Predictor.predict_cov` (issue 23: correlated samples of a pose's modes) against the dense
+    posterior covariance cov(f_t(x), f_u(x)) = B_tu - k_t^T K^-1 k_u, built as in
+    `_dense_posterior`; zero between GPs; its diagonal is `predict`'s variance."""
+    from scipy.spatial.distance import cdist
+
+    rng = np.random.default_rng(3)
+    X = rng.uniform(-2, 2, (30, 2))
+    Y = np.column_stack([np.sin(X[:, 0]), np.sin(X[:, 0]) + 0.3 * X[:, 1], np.cos(X[:, 1])]) + 0.05 * rng.standard_normal((30, 3))
+    two = gp.GP(theta=np.concatenate([[0.1, -0.2], [0.8, 0.6, 0.3], np.log([0.01, 0.02])]), X=X, Y=Y[:, :2])
+    one = gp.GP(theta=np.array([0.3, 0.1, 0.0, np.log(0.01)]), X=X, Y=Y[:, [2]])
+    predictor = gp.Predictor.of([two, one], [[2, 0], [1]])
+    Xs = np.vstack([rng.uniform(-2.5, 2.5, (20, 2)), [[7.0, 8.0]]])
+    cov = predictor.predict_cov(Xs)
+    _, std = predictor.predict(Xs, return_std=True)
+    assert np.allclose(np.sqrt(np.einsum("mtt->mt", cov)), std, rtol=1e-9, atol=1e-12)
+    assert np.all(cov[:, 1, [0, 2]] == 0) and np.all(cov[:, [0, 2], 1] == 0)
+    l, B, noise = two.length_scales, two.task_covariance, two.noise_variances
+    K = np.kron(B, np.exp(-0.5 * cdist(X / l, X / l, "sqeuclidean"))) + np.kron(np.diag(noise), np.eye(len(X)))
+    ks = np.exp(-0.5 * cdist(Xs / l, X / l, "sqeuclidean"))
+    for i in range(len(Xs)):
+        cross = np.stack([np.kron(B[t], ks[i]) for t in range(2)])  # (2, 2 n)
+        dense = B - cross @ np.linalg.solve(K, cross.T)
+        assert np.allclose(cov[i][np.ix_([2, 0], [2, 0])], dense, rtol=1e-8, atol=1e-10 * B.max())
+    assert abs(cov[0, 0, 2]) > 0.1 * np.sqrt(cov[0, 0, 0] * cov[0, 2, 2])  # correlated tasks: the test can fail
+
+
 def test_fits_on_one_blas_thread_reach_the_same_optimum():
     """`fit_gps` (a thread pool, one BLAS thread per fit) finds the optimum `fit_gp` finds with
     the default BLAS threads, to 1e-6 in the log likelihood."""

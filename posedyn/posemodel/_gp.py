@@ -100,6 +100,9 @@ class Predictor:
     reduction: np.ndarray  # (g, n, t): sum_i (P^T b_t)_i^2 Dinv_ij, zero-padded
     slots: np.ndarray  # (T,): position in the (g t) flattened outputs of every output column
     prior_var: np.ndarray  # (T,) diag B
+    task_factor: np.ndarray  # (g, t, t): P^T B, zero-padded (for covariances between tasks)
+    dinv: np.ndarray  # (g, t, n): Dinv, zero-padded
+    task_cov: np.ndarray  # (g, t, t): B, zero-padded
 
     #: Query rows per block: about this many kernel entries (g x rows x n) at a time.
     BLOCK_ENTRIES = 1_000_000
@@ -115,6 +118,7 @@ class Predictor:
         T = 1 + max(max(c) for c in columns)
         scaled, half, inv_l2 = np.empty((g, D, n)), np.empty((g, 1, n)), np.empty((D, g))
         V_all, mean_w, red = np.empty((g, n, n)), np.zeros((g, n, t)), np.zeros((g, n, t))
+        factor, dinv, task_cov = np.zeros((g, t, t)), np.zeros((g, t, n)), np.zeros((g, t, t))
         slots, prior_var = np.full(T, -1), np.zeros(T)
         for k, (gp, cols) in enumerate(zip(gps, columns)):
             if gp.X is not X and not np.array_equal(gp.X, X):
@@ -126,11 +130,39 @@ class Predictor:
             scaled[k], half[k, 0], inv_l2[:, k] = (X * il2).T, 0.5 * np.sum(X * X * il2, axis=1), il2
             V_all[k], mean_w[k, :, :tk] = V, alpha.T @ B
             red[k, :, :tk] = (((P.T @ B) ** 2).T @ Dinv).T
+            factor[k, :tk, :tk], dinv[k, :tk], task_cov[k, :tk, :tk] = P.T @ B, Dinv, B
             slots[cols] = k * t + np.arange(tk)
             prior_var[cols] = np.diag(B)
         if np.any(slots < 0):
             raise ValueError("every output column needs a GP")
-        return cls(scaled, half, 0.5 * inv_l2, V_all, mean_w, red, slots, prior_var)
+        return cls(scaled, half, 0.5 * inv_l2, V_all, mean_w, red, slots, prior_var, factor, dinv, task_cov)
+
+    def _kernels(self, x: np.ndarray) -> np.ndarray:
+        """k(x, X_train) of every GP, (g, rows, n)."""
+        # -|x - y|^2 / (2 l^2) = x.(y / l^2) - |x / l|^2 / 2 - |y / l|^2 / 2, at most 0
+        log_k = np.matmul(x, self.scaled_train)  # (g, rows, n)
+        log_k -= ((x * x) @ self.half_inv_l2).T[:, :, None]
+        log_k -= self.half_norm_train
+        # floored at exp(-LOG_K_FLOOR): subnormal numbers (a query far from the data in some
+        # GP's length scales) slow every product that follows ~5x
+        return np.exp(np.clip(log_k, -LOG_K_FLOOR, 0.0, out=log_k), out=log_k)
+
+    def predict_cov(self, X: np.ndarray) -> np.ndarray:
+        """Latent covariance between the outputs at each input, (m, T, T), without the
+        observation noise: zero between GPs; within a GP of several tasks (b_t: column t of B)
+
+            cov_tu(x) = B_tu - sum_i (P^T b_t)_i (P^T b_u)_i sum_j Dinv_ij ((V^T kx(x))_j)^2,
+
+        whose diagonal is `predict`'s variance."""
+        X = np.asarray(X, dtype=float)
+        g, t, _ = self.task_factor.shape
+        w = np.matmul(self._kernels(X), self.eigvecs)  # (g, m, n)
+        d = np.einsum("gmn,gin->gmi", w * w, self.dinv)  # (g, m, t)
+        cov = self.task_cov[:, None] - np.einsum("git,gmi,giu->gmtu", self.task_factor, d, self.task_factor)
+        full = np.zeros((len(X), g * t, g * t))
+        for k in range(g):
+            full[:, k * t : (k + 1) * t, k * t : (k + 1) * t] = cov[k]
+        return full[:, self.slots][:, :, self.slots]
 
     def predict(self, X: np.ndarray, return_std: bool = False):
         """Latent mean (m, T), and std without the observation noise, at inputs X (m, D)."""
@@ -143,13 +175,7 @@ class Predictor:
         for lo in range(0, m, block):
             x = X[lo : lo + block]
             rows = len(x)
-            # -|x - y|^2 / (2 l^2) = x.(y / l^2) - |x / l|^2 / 2 - |y / l|^2 / 2, at most 0
-            log_k = np.matmul(x, self.scaled_train)  # (g, rows, n)
-            log_k -= ((x * x) @ self.half_inv_l2).T[:, :, None]
-            log_k -= self.half_norm_train
-            # floored at exp(-LOG_K_FLOOR): subnormal numbers (a query far from the data in some
-            # GP's length scales) slow every product that follows ~5x
-            kx = np.exp(np.clip(log_k, -LOG_K_FLOOR, 0.0, out=log_k), out=log_k)
+            kx = self._kernels(x)
             # thin products by einsum: numpy's stacked matmul with a few columns is ~4x slower
             means = np.einsum("grn,gnt->rgt", kx, self.mean_weights, optimize=True).reshape(rows, g * t)
             mean[lo : lo + rows] = means[:, self.slots]

@@ -36,10 +36,11 @@ from posedyn.errors import InputError, check_choice
 from posedyn.io import format_modal_table
 from posedyn.posemodel._gp import Predictor, fit_gps
 from posedyn.robot import direction_rows, tool_pose, twin_modes
-from posedyn.table import DIRECTIONS, JOINT_COLUMNS, ModalTable, PoseSet
+from posedyn.table import DIRECTIONS, JOINT_COLUMNS, MODAL_PARAMS, ModalTable, PoseSet
+from posedyn.uncertainty import ModalDistribution
 
 METHODS = ("stgp", "mtgp", "physics")
-PARAMS = ("fn_hz", "zeta", "k_n_per_m")
+PARAMS = MODAL_PARAMS
 CROSS = ("k_xy_n_per_m", "k_yx_n_per_m")  # signed: learned as compliance 1 / k in linear space
 
 
@@ -274,6 +275,28 @@ class PoseModel:
             prior = self.prior_model_.log_values(poses, self.targets_)
             mean = mean + np.where(self.prior_targets_, np.nan_to_num(prior), 0.0)
         return mean, std
+
+    def predict_log_cov(self, poses: PoseSet):
+        """Mean (n, T) and covariance (n, T, T) of ln(value) of the targets at every pose: the
+        latent predictive covariance, correlated within a multi-task group (seed 003 eq. 28)."""
+        mean, _ = self.predict_log(poses)
+        X = (feature_matrix(poses, self.features_) - self.x_mean_) / self.x_scale_
+        cov = self._predictor[1].predict_cov(X)  # built by predict_log
+        return mean, cov * np.outer(self.y_scale_, self.y_scale_)[None]
+
+    def predict_distributions(self, poses: PoseSet, table: ModalTable | None = None) -> list[ModalDistribution]:
+        """The predictive distribution of every pose's modes (`posedyn.uncertainty`), rows as
+        in `predict_table` (pass its result as `table` if already made); cross stiffnesses at
+        their means."""
+        table = self.predict_table(poses) if table is None else table
+        mean, cov = self.predict_log_cov(poses)
+        index = {t: j for j, t in enumerate(self.targets_)}
+        out = []
+        for p in range(len(poses)):
+            one = table.select_poses([p])
+            columns = [index[target_name(d, int(m), param)] for d, m in zip(one.direction, one.mode) for param in PARAMS]
+            out.append(ModalDistribution(one, mean[p, columns].reshape(-1, 3), cov[p][np.ix_(columns, columns)]))
+        return out
 
     def predict(self, poses: PoseSet, return_std: bool = False):
         """Mean (and std) of every target at every pose, original units, (n, T): log-normal

@@ -20,7 +20,7 @@ from posedyn.errors import InputError
 from posedyn.io.atomic import write_text_atomic
 from posedyn.io.cut import read_cut
 from posedyn.stability import Cut, mean_force_matrix
-from service.cli.common import Milling, console, finite_or_none, modal_table_for, print_json, resolve_cut
+from service.cli.common import Milling, console, finite_or_none, modal_input_for, print_json, resolve_cut
 
 app = typer.Typer(help="MRF absorber: optimal tuning, field for a target frequency.", no_args_is_help=True)
 
@@ -163,13 +163,18 @@ def schedule(
     absorber: Optional[Path] = typer.Option(None, "--absorber", help="Absorber file (default: seed 004's design)."),
     policy: Policy = typer.Option(Policy.match, "--policy"),
     actuator: Optional[Path] = typer.Option(None, "--actuator", help="Actuator file for the controller field (default: seed 000's)."),
+    robust: bool = typer.Option(False, "--robust", help="Also the depth a cell can count on: the 95 % lower bound over samples of each pose's modes (the model's predictive distribution, or the table's std columns), bare and with the nominal or robust absorber setting."),
+    robust_samples: int = typer.Option(32, "--robust-samples", min=8, max=2000, help="Latin-hypercube samples per pose for --robust."),
+    seed: int = typer.Option(0, "--seed", help="Sampling seed for --robust."),
     out: Optional[Path] = typer.Option(None, "--out", help="Write the schedule (JSON)."),
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Per-pose absorber schedule: chatter, target frequency, field, current, depths."""
     the_cut, rpm, steps = read_cut(resolve_cut(cut, model_dir))
-    config = ScheduleConfig(the_cut, rpm, read_absorber(absorber), control=read_actuator(actuator), policy=policy.value, steps=steps)
-    entries = schedule_entries(modal_table_for(model_dir, modes, poses), config)
+    config = ScheduleConfig(the_cut, rpm, read_absorber(absorber), control=read_actuator(actuator), policy=policy.value, steps=steps,
+                            robust_samples=robust_samples if robust else 0, robust_seed=seed)
+    table, distributions = modal_input_for(model_dir, modes, poses, distributions=robust)
+    entries = schedule_entries(table, config, distributions)
     if out is not None:
         _write_json(out, entries)
     if as_json:
@@ -185,6 +190,18 @@ def schedule(
             _fmt(a["current_a"]), "yes" if a["feasible"] else "NO", _fmt(e["critical_depth_with_absorber_mm"]),
         )
     console.print(t)
+    if robust:
+        t = Table(title=f"guaranteed depths (95 % lower bounds, {robust_samples} samples per pose)", title_justify="left")
+        for c in ("pose", "critical mm", "cv %", "tuning", "target Hz", "field mT", "with absorber mm", "nominal setting mm"):
+            t.add_column(c, justify="right")
+        for e in entries:
+            r = e.get("robust")
+            if r is None:
+                t.add_row(e["pose_id"], *["-"] * 7)
+                continue
+            t.add_row(e["pose_id"], _fmt(r["critical_depth_p95_mm"]), _fmt(r["critical_depth_cv_pct"]), r["tuning"], f"{r['absorber']['target_hz']:.2f}",
+                      f"{r['absorber']['field_mt']:.1f}", _fmt(r["critical_depth_with_absorber_p95_mm"]), _fmt(r["nominal_tuning_with_absorber_p95_mm"]))
+        console.print(t)
     if out is not None:
         console.print(f"wrote {out}")
 

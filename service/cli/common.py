@@ -16,6 +16,7 @@ from posedyn.errors import InputError
 from posedyn.io import read_modal_table, read_pose_table
 from posedyn.io.json_values import json_ready
 from posedyn.io.model_dir import load_model
+from posedyn.uncertainty import distributions_from_table
 
 console = Console(width=None if sys.stdout.isatty() else 140)
 
@@ -36,6 +37,12 @@ class Milling(str, Enum):
 
 def modal_table_for(model_dir: Optional[Path], modes: Optional[Path], poses: Path):
     """The modes at the requested poses: rows of a modal table, or a model's predictions."""
+    return modal_input_for(model_dir, modes, poses, distributions=False)[0]
+
+
+def modal_input_for(model_dir: Optional[Path], modes: Optional[Path], poses: Path, distributions: bool):
+    """(modal table, the poses' distributions or None): with `distributions`, a model's
+    predictive ones (correlated), else those of the table's std columns."""
     if (model_dir is None) == (modes is None):
         raise InputError("either MODEL_DIR or --modes MODAL.csv", column="--modes")
     pose_set = read_pose_table(poses)
@@ -44,8 +51,11 @@ def modal_table_for(model_dir: Optional[Path], modes: Optional[Path], poses: Pat
         missing = [p for p in pose_set.pose_id if p not in table.poses.pose_id]
         if missing:
             raise InputError("pose_ids present in the modal table", got=missing[:3], file=str(poses), column="pose_id")
-        return table.select_poses([table.poses.index(p) for p in pose_set.pose_id])
-    return load_model(model_dir).predict_table(pose_set)
+        table = table.select_poses([table.poses.index(p) for p in pose_set.pose_id])
+        return table, distributions_from_table(table) if distributions else None
+    model = load_model(model_dir)
+    table = model.predict_table(pose_set)
+    return table, model.predict_distributions(pose_set, table) if distributions else None
 
 
 def resolve_cut(cut: Optional[Path], model_dir: Optional[Path]) -> Path:

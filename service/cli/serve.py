@@ -45,6 +45,7 @@ def serve(
     plans_in_memory: int = typer.Option(16, "--plans-in-memory", min=1, help="Plans held with a publisher for late joiners."),
     pending_plans: int = typer.Option(4, "--pending-plans", min=1, help="Plans computed at once before 'busy'."),
     stored_plans: int = typer.Option(256, "--stored-plans", min=1, help="Plan files kept in --state-dir."),
+    robust_samples: int = typer.Option(0, "--robust-samples", min=0, max=2000, help="> 0: every entry also carries the guaranteed depth over that many samples of the pose's modes (`robust`; 8 or more; seconds per pose)."),
 ):
     """Serve per-pose schedules over Zenoh until SIGTERM or SIGINT."""
     if mode not in ("peer", "client", "router"):
@@ -60,7 +61,9 @@ def serve(
     except RequestError as exc:
         raise InputError("a cell name of letters, digits, - or _", got=cell, column="--cell") from exc
     key = read_key(signing_key) if signing_key else None
-    spec = EngineSpec(model, cut, absorber, actuator, twin)
+    if 0 < robust_samples < 8:
+        raise InputError("--robust-samples 0 (off) or 8-2000", got=robust_samples, column="--robust-samples")
+    spec = EngineSpec(model, cut, absorber, actuator, twin, robust_samples)
     spec.build()  # every file checked here, with its name in the error, before any process starts
     if not listen and not connect and config is None:
         listen = [DEFAULT_LISTEN]

@@ -33,6 +33,7 @@ def sweep(
     policy: str = typer.Option("match", "--policy", help="Absorber target: match (dominant chatter) or sims (max-min Re G; slow)."),
     steps: Optional[int] = typer.Option(None, "--steps", min=4, help="Expert override: semi-discretization steps per delay instead of the converged engine (error not estimated)."),
     chunk_size: int = typer.Option(250, "--chunk-size", min=1, help="Poses per chunk (the unit of work, of writing and of resuming)."),
+    robust_samples: int = typer.Option(0, "--robust-samples", min=0, max=2000, help="> 0 (8 or more): the guaranteed depths (95 % lower bounds) over that many samples of each pose's modes, and the robust absorber setting; seconds per pose. Needs a model."),
     lobes: bool = typer.Option(True, "--lobes/--no-lobes", help="Stability lobes at three representative poses in the report."),
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary instead of the table."),
 ):
@@ -53,6 +54,7 @@ def sweep(
         policy=policy,
         steps=steps if steps is not None else read_cut(cut)[2],
         chunk_size=chunk_size,
+        robust_samples=robust_samples,
     )
     show = sys.stderr.isatty() and not as_json
     with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(), console=console, disable=not show) as bar:
@@ -92,6 +94,6 @@ def _provenance(spec, outcome, grid_twin) -> dict:
     out["inputs"] = {role: f"{path} (sha256 {hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]})" for role, path in files.items()}
     cut, rpm, _ = read_cut(spec.cut)
     out["cut"] = {"rpm": rpm, "teeth": cut.teeth, "kt_mpa": cut.kt_pa / 1e6, "kn_mpa": cut.kn_pa / 1e6, "radial_immersion": cut.radial_immersion, "milling": cut.milling}
-    out["settings"] = {"policy": spec.policy, "steps": spec.steps, "chunk_size": spec.chunk_size, "workers": outcome.workers}
+    out["settings"] = {"policy": spec.policy, "steps": spec.steps, "chunk_size": spec.chunk_size, "robust_samples": spec.robust_samples, "workers": outcome.workers}
     out["command"] = " ".join(["posedyn"] + sys.argv[1:]) if os.path.basename(sys.argv[0]).startswith("posedyn") else "(library call)"
     return out

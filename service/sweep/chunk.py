@@ -53,7 +53,8 @@ def context(spec_json: str, grid_twin: str | None = None) -> SweepContext:
     load_tuning_cache()  # once per worker process: the virtual absorber's optima of earlier runs
     cut, rpm, _ = read_cut(spec.cut)
     control = read_actuator(Path(spec.actuator) if spec.actuator else None)
-    schedule = ScheduleConfig(cut, rpm, read_absorber(spec.absorber), control=control, policy=spec.policy, steps=spec.steps, absolute_limits=False)
+    schedule = ScheduleConfig(cut, rpm, read_absorber(spec.absorber), control=control, policy=spec.policy, steps=spec.steps, absolute_limits=False,
+                              robust_samples=spec.robust_samples)
     model = robot = params = None
     if spec.model:
         model = load_model(spec.model)
@@ -103,7 +104,9 @@ def _model_modes(ctx: SweepContext, poses: PoseSet, index: list[int]) -> dict[in
     subset = poses.subset(reachable)
     if ctx.robot is not None:
         subset = PoseSet(subset.pose_id, subset.position_mm, subset.orientation, subset.orientation_deg, np.array(joints))
-    return dict(zip(reachable, table_pose_modes(ctx.model.predict_table(subset))))
+    table = ctx.model.predict_table(subset)
+    distributions = ctx.model.predict_distributions(subset, table) if ctx.schedule.robust_samples else None
+    return dict(zip(reachable, table_pose_modes(table, distributions)))
 
 
 def compute_chunk(spec_json: str, poses: PoseSet, grid_twin: str | None = None) -> list[dict]:
@@ -156,11 +159,25 @@ def _result_columns(result) -> dict:
         gain_margin_db=c["gain_margin_db"] if c and math.isfinite(c["gain_margin_db"]) else None,
         controller_force_n=c["max_force_n"] if c else None,
         dynamic_stiffness_gain_pct=c["dynamic_stiffness_gain_pct"] if c else None,
+        **_robust_columns(result.robust),
         stability_method=result.stability.method,
         stability_rel_error=max(errors) if errors else None,
         flags=";".join(flags),
     )
     return row
+
+
+def _robust_columns(robust) -> dict:
+    if robust is None:
+        return {}
+    return {
+        "critical_depth_p95_mm": _mm(robust.depth_p95_m),
+        "critical_depth_cv_pct": 100 * robust.depth_cv if math.isfinite(robust.depth_cv) else None,
+        "robust_tuning": robust.tuning,
+        "robust_target_hz": robust.absorber.target_hz,
+        "robust_field_mt": robust.absorber.field_t * 1e3,
+        "critical_depth_with_absorber_p95_mm": _mm(robust.depth_with_absorber_p95_m),
+    }
 
 
 def _mm(depth_m: float):

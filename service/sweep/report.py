@@ -20,6 +20,8 @@ MAPS = (
     ("lowest_fn_hz", "Lowest natural frequency (x-y)", "Hz", "viridis"),
     ("critical_depth_mm", "Critical depth without absorber", "mm", "RdYlGn"),
     ("critical_depth_with_absorber_mm", "Critical depth with the scheduled absorber", "mm", "RdYlGn"),
+    ("critical_depth_p95_mm", "Guaranteed critical depth without absorber (95 % lower bound)", "mm", "RdYlGn"),
+    ("critical_depth_with_absorber_p95_mm", "Guaranteed critical depth with the robust or nominal absorber setting", "mm", "RdYlGn"),
     ("dominant_chatter_hz", "Dominant chatter frequency", "Hz", "plasma"),
     ("field_mt", "Required absorber field", "mT", "magma"),
     ("dvf_gain_ns_per_m", "DVF controller gain", "N s/m", "cividis"),
@@ -27,6 +29,7 @@ MAPS = (
     ("sle_um", "Surface location error (+ = undercut)", "um", "coolwarm"),
 )
 WORST_COLUMNS = ("pose_id", "x_mm", "y_mm", "z_mm", "beta_deg", "critical_depth_mm", "dominant_chatter_hz", "field_mt", "critical_depth_with_absorber_mm", "dvf_gain_ns_per_m", "sle_um", "flags")
+ROBUST_WORST_COLUMNS = ("critical_depth_p95_mm", "robust_tuning", "robust_field_mt", "critical_depth_with_absorber_p95_mm")
 
 
 def write_report(path: Path, rows: list[dict], lobes: list[dict], provenance: dict, title: str = "Pose sweep") -> None:
@@ -58,7 +61,9 @@ def render(rows: list[dict], lobes: list[dict], provenance: dict, title: str) ->
         parts.append("<h2>Stability lobes at representative poses</h2>")
         parts.append(html.figure(_lobes_png(lobes), "Stability lobes without and with the scheduled absorber"))
     parts.append("<h2>Worst poses (smallest critical depth)</h2>")
-    parts.append(html.table(sorted(reachable, key=lambda r: r["critical_depth_mm"] if r.get("critical_depth_mm") is not None else math.inf)[:10], WORST_COLUMNS))
+    robust = any(r.get("robust_tuning") for r in reachable)
+    columns = WORST_COLUMNS[:-1] + (ROBUST_WORST_COLUMNS if robust else ()) + WORST_COLUMNS[-1:]
+    parts.append(html.table(sorted(reachable, key=lambda r: r["critical_depth_mm"] if r.get("critical_depth_mm") is not None else math.inf)[:10], columns))
     flagged = {}
     for r in rows:
         for flag in filter(None, (r.get("flags") or "").split(";")):
@@ -96,6 +101,11 @@ def _summary(rows, reachable, provenance) -> str:
         items.append(f"critical depth without absorber: {depths.min():.3g}-{depths.max():.3g} mm (median {np.median(depths):.3g})")
     if len(with_abs):
         items.append(f"with the scheduled absorber: {with_abs.min():.3g}-{with_abs.max():.3g} mm (median {np.median(with_abs):.3g})")
+    guaranteed = [r for r in reachable if r.get("critical_depth_with_absorber_p95_mm") is not None]
+    if guaranteed:
+        changed = [r for r in guaranteed if r.get("robust_tuning") == "robust"]
+        items.append(f"guaranteed depth (95 % lower bound) with the absorber: {min(r['critical_depth_with_absorber_p95_mm'] for r in guaranteed):.3g} mm at the worst pose; "
+                     f"the robust setting differs from the nominal one at {len(changed)} of {len(guaranteed)} poses")
     if reachable:
         items.append(f"absorber within its field and current range at {feasible} of {len(reachable)} reachable poses")
     return "<ul>" + "".join(f"<li>{i}</li>" for i in items) + "</ul>"

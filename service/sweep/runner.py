@@ -200,7 +200,7 @@ def _read_chunk(path: Path) -> list[dict]:
 def _parse(column: str, text: str):
     if text == "":
         return None
-    if column in ("pose_id", "flags", "actuator_direction", "stability_method"):
+    if column in ("pose_id", "flags", "actuator_direction", "stability_method", "robust_tuning"):
         return text
     if text in ("true", "false"):
         return text == "true"

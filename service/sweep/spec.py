@@ -26,6 +26,12 @@ RESULT_COLUMNS = (
     "current_a",
     "absorber_feasible",
     "critical_depth_with_absorber_mm",
+    "critical_depth_p95_mm",
+    "critical_depth_cv_pct",
+    "robust_tuning",
+    "robust_target_hz",
+    "robust_field_mt",
+    "critical_depth_with_absorber_p95_mm",
     "actuator_direction",
     "dvf_gain_ns_per_m",
     "gain_margin_db",
@@ -45,7 +51,9 @@ class SweepSpec:
     `model` (a model directory) or `twin` (a robot-twin file) gives the modes; `poses` is a grid
     (TOML) or a pose list (CSV); `cut` a cut file, optionally with an `[sle]` section;
     `steps` overrides the converged stability engine with the semi-discretization (expert use;
-    its error is not estimated); None (default) or the cut file's `[stability] steps`."""
+    its error is not estimated); None (default) or the cut file's `[stability] steps`;
+    `robust_samples` > 0 adds the guaranteed depths over that many samples of each pose's modes
+    (a model's predictive distribution; none for a twin, whose modes carry no uncertainty)."""
 
     poses: str
     cut: str
@@ -56,6 +64,7 @@ class SweepSpec:
     policy: str = "match"
     steps: int | None = None
     chunk_size: int = 250
+    robust_samples: int = 0  # > 0: the guaranteed depths (absorber.chain.robust_entries) of every pose
 
     def __post_init__(self):
         if (self.model is None) == (self.twin is None):
@@ -65,6 +74,10 @@ class SweepSpec:
             raise InputError("an integer number of steps >= 4 (or none: the converged engine)", got=self.steps, column="steps")
         if not isinstance(self.chunk_size, int) or self.chunk_size < 1:
             raise InputError("a chunk size >= 1", got=self.chunk_size, column="chunk_size")
+        if not isinstance(self.robust_samples, int) or not (self.robust_samples == 0 or 8 <= self.robust_samples <= 2000):
+            raise InputError("robust samples 0 (off) or 8-2000", got=self.robust_samples, column="robust_samples")
+        if self.robust_samples and self.model is None:
+            raise InputError("a model directory for robust samples (a twin's modes carry no uncertainty)", got=self.twin, column="robust_samples")
 
     def to_json(self) -> str:
         return json.dumps(asdict(self), sort_keys=True)

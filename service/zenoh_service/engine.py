@@ -20,6 +20,12 @@ from posedyn.table import PoseSet
 from service.zenoh_service.protocol import RequestError
 
 
+def model_version(training_hash: str, robust_samples: int) -> str:
+    """What the published entries depend on besides the cut: the model, and the robust sampling
+    (plans kept from a run with other settings are recomputed, not republished)."""
+    return training_hash if not robust_samples else f"{training_hash}+robust{robust_samples}"
+
+
 class ScheduleEngine:
     """A loaded model, the default cut and the absorber and controller settings.
 
@@ -28,9 +34,11 @@ class ScheduleEngine:
     must lie within its training range widened by a quarter of that range, at least 50 mm or
     15 deg (`outside_workspace`: a Gaussian process far from its data returns its prior)."""
 
-    def __init__(self, model_dir: Path, cut: Path, absorber: Path | None = None, actuator: Path | None = None, twin: Path | None = None):
+    def __init__(self, model_dir: Path, cut: Path, absorber: Path | None = None, actuator: Path | None = None, twin: Path | None = None,
+                 robust_samples: int = 0):
         self.model = load_model(model_dir)
-        self.model_version = self.model.training_hash_
+        self.robust_samples = robust_samples
+        self.model_version = model_version(self.model.training_hash_, robust_samples)
         self.cut, self.rpm, self.steps = read_cut(cut)
         self.absorber = read_absorber(absorber)
         self.control = read_actuator(actuator)
@@ -49,7 +57,8 @@ class ScheduleEngine:
         poses = self.pose_set(pose)
         config = self.config(cut)
         table = self.model.predict_table(poses)
-        return schedule_entries(table, config)[0]
+        distributions = self.model.predict_distributions(poses, table) if config.robust_samples else None
+        return schedule_entries(table, config, distributions)[0]
 
     def config(self, cut: dict) -> ScheduleConfig:
         """The schedule settings with a request's cut overrides."""
@@ -60,7 +69,7 @@ class ScheduleEngine:
             if "kn_mpa" in cut:
                 overrides["kn_pa"] = cut["kn_mpa"] * 1e6
             the_cut = replace(self.cut, **overrides)
-            return ScheduleConfig(the_cut, cut.get("rpm", self.rpm), self.absorber, control=self.control, steps=self.steps)
+            return ScheduleConfig(the_cut, cut.get("rpm", self.rpm), self.absorber, control=self.control, steps=self.steps, robust_samples=self.robust_samples)
         except InputError as exc:
             raise RequestError("invalid_field", f"cut: {exc}") from None
 

@@ -21,7 +21,7 @@ from absorber.files import load_tuning_cache, save_tuning_cache
 from absorber.tuning import known_tunings
 from posedyn.io.json_values import json_ready
 from posedyn.io.model_dir import load_model
-from service.zenoh_service.engine import ScheduleEngine
+from service.zenoh_service.engine import ScheduleEngine, model_version
 from service.zenoh_service.protocol import RequestError
 
 
@@ -34,12 +34,13 @@ class EngineSpec:
     absorber: Path | None = None
     actuator: Path | None = None
     twin: Path | None = None
+    robust_samples: int = 0
 
     def build(self) -> ScheduleEngine:
-        return ScheduleEngine(self.model_dir, self.cut, self.absorber, self.actuator, self.twin)
+        return ScheduleEngine(self.model_dir, self.cut, self.absorber, self.actuator, self.twin, self.robust_samples)
 
     def model_version(self) -> str:
-        return load_model(self.model_dir).training_hash_
+        return model_version(load_model(self.model_dir).training_hash_, self.robust_samples)
 
 
 _engine: ScheduleEngine | None = None
