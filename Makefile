@@ -26,11 +26,12 @@ demo: $(STAMP)
 	printf 'pose_id,x_mm,y_mm,z_mm,beta_deg\nnear,1400,-200,600,-30\nfar,1850,250,600,50\n' > build/demo/poses.csv
 	$(BIN)/posedyn predict build/demo/model --poses build/demo/poses.csv --out build/demo/predicted.csv
 	@echo
-	@echo "Absorber schedule (seed 004's MRF absorber and cut) at seed 004's positions 3, 5 and 7"
-	printf 'pose_id,x_mm,y_mm,z_mm,beta_deg\nP3,1600,0,800,0\nP5,1400,0,800,0\nP7,1200,0,800,0\n' > build/demo/hou2023_poses.csv
+	@echo "Absorber schedule (seed 004's MRF absorber and cut) at seed 004's positions 3, 5 and 7 and at x = 1000 mm,"
+	@echo "with the depths the model's uncertainty guarantees and the robust field"
+	printf 'pose_id,x_mm,y_mm,z_mm,beta_deg\nP3,1600,0,800,0\nP5,1400,0,800,0\nP7,1200,0,800,0\nx1000,1000,0,800,0\n' > build/demo/hou2023_poses.csv
 	$(BIN)/posedyn train datasets/seeds/hou2023_positions.csv --cv 0 --cut datasets/seeds/hou2023_cut.toml --out build/demo/hou2023_model
 	$(BIN)/posedyn schedule build/demo/hou2023_model --poses build/demo/hou2023_poses.csv \
-		--cut datasets/seeds/hou2023_cut.toml --policy match --out build/demo/schedule.json
+		--cut datasets/seeds/hou2023_cut.toml --policy match --robust --out build/demo/schedule.json
 	@echo
 	@echo "Chatter at the far pose from the predicted modes (spindle 10,700 rpm, 3-flute 12.7 mm end mill, Al)"
 	$(BIN)/posedyn chatter --modes build/demo/predicted.csv --pose-id far --rpm 10700 --teeth 3 \
@@ -42,8 +43,8 @@ demo: $(STAMP)
 		--cut datasets/cuts/sweep_demo_cut.toml --out build/demo/sweep --workers 2 --chunk-size 28
 	@echo "open build/demo/sweep/report.html in a browser"
 	@echo
-	@echo "Serve schedules over Zenoh (embedded peer on 127.0.0.1:17447), ask for position 5's schedule, stop"
-	$(BIN)/posedyn serve --model build/demo/hou2023_model --cell demo \
+	@echo "Serve schedules (with the guaranteed depths) over Zenoh (embedded peer on 127.0.0.1:17447), ask for position 5's schedule, stop"
+	$(BIN)/posedyn serve --model build/demo/hou2023_model --cell demo --robust-samples 32 \
 		--listen tcp/127.0.0.1:17447 --state-dir build/demo/service > build/demo/service.log 2>&1 & pid=$$!; \
 	for i in $$(seq 1 150); do grep -q serving build/demo/service.log && break; sleep 0.2; done; \
 	$(BIN)/posedyn query --cell demo --connect tcp/127.0.0.1:17447 --timeout-s 60 \

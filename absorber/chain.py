@@ -359,7 +359,8 @@ def _robust_candidate(pose: PoseModes, samples: list[ToolTipDynamics], chatter_h
         return None
     target = float(targets[best])
     setting, current, feasible = coil_setting(target, config)
-    return AbsorberEntry("robust", target, setting.field_t, current, feasible, (setting.field_t, setting.field_t))
+    lo, hi = nominal.field_t_interval  # the target's +-2 std, widened to hold the robust field
+    return AbsorberEntry("robust", target, setting.field_t, current, feasible, (min(lo, setting.field_t), max(hi, setting.field_t)))
 
 
 def schedule_entries(table: ModalTable, config: ScheduleConfig, distributions: list[ModalDistribution] | None = None) -> list[dict]:
