@@ -355,6 +355,32 @@ def controller_entry(pose_id: str, rows, tool_rotation: np.ndarray, config: Cont
     return entry
 
 
+def robust_gain(sampled_rows, tool_rotation: np.ndarray, config: ControlConfig, nominal_gain_ns_per_m: float) -> dict | None:
+    """The DVF gain that keeps the required gain margin in 95 % of sampled structures (issue 23):
+    each sample's Nyquist limit k_i (its robot modes below 500 Hz in the actuator's direction,
+    as `controller_entry` takes them), the gain min(nominal gain, q05(k_i) / 10^(margin / 20)),
+    and the share of samples in which the nominal gain keeps the margin. `sampled_rows`: per
+    sample, rows (direction, mode, fn_hz, zeta, k_n_per_m). None without such modes."""
+    direction = actuator_direction(tool_rotation, config.mount_axis)
+    fn_act = config.actuator.fn_hz(actuator_angle_to_gravity(tool_rotation, config.mount_axis))
+    limits = []
+    for rows in sampled_rows:
+        modes = [(fn, zeta, k) for d, _, fn, zeta, k, *_ in rows if d == direction and fn < 500 and math.isfinite(k)]
+        if not modes:
+            return None
+        H = modal_frf(modes)
+        loop = DVF(H, H, H, config.actuator, fn_act, config.filters)
+        limits.append(loop.nyquist_gain_limit() if loop.open_loop_stable() else 0.0)
+    limits = np.array(limits)
+    margin = 10 ** (config.margin_db / 20)
+    k05 = float(np.quantile(limits, 0.05))
+    return {
+        "dvf_gain_ns_per_m": float(min(nominal_gain_ns_per_m, k05 / margin)),
+        "max_stable_gain_q05_ns_per_m": k05,
+        "nominal_gain_keeps_margin_pct": float(100 * np.mean(limits >= margin * nominal_gain_ns_per_m)),
+    }
+
+
 def control_entries(table, config: ControlConfig) -> list[dict]:
     """One control schedule entry per pose of a modal table."""
     entries = []

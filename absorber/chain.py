@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from absorber.active_damping import ControlConfig, controller_entry
+from absorber.active_damping import ControlConfig, controller_entry, robust_gain
 from absorber.coil import Coil
 from absorber.coupling import with_absorber
 from absorber.mrf import FieldSetting, MRFAbsorber
@@ -109,6 +109,7 @@ class RobustEntry:
     depth_with_absorber_p95_m: float
     nominal_with_absorber_p95_m: float  # with the nominal setting, for comparison
     converged: bool  # every sample's stability result converged
+    controller: dict | None = None  # `absorber.active_damping.robust_gain`: the DVF gain that keeps its margin in 95 % of samples
 
     def to_json(self) -> dict:
         return {
@@ -120,6 +121,7 @@ class RobustEntry:
             "critical_depth_with_absorber_p95_mm": _mm(self.depth_with_absorber_p95_m),
             "nominal_tuning_with_absorber_p95_mm": _mm(self.nominal_with_absorber_p95_m),
             "converged": self.converged,
+            "controller": self.controller,
         }
 
 
@@ -321,8 +323,19 @@ def robust_entries(poses: list[PoseModes], chatter_hz: list[float], nominal: lis
             robust_p95, _ = lower95(robust_coupled[0][mine])
             if robust_p95 > nominal_p95:
                 tuning, entry, best, ok = "robust", candidates[i], robust_p95, ok and bool(robust_coupled[1][mine].all())
-        out[i] = RobustEntry(n, depth_p95, cv, tuning, entry, best, nominal_p95, ok)
+        out[i] = RobustEntry(n, depth_p95, cv, tuning, entry, best, nominal_p95, ok, _robust_controller(poses[i], n, seed, config))
     return out
+
+
+def _robust_controller(pose: PoseModes, n: int, seed: int, config: ScheduleConfig) -> dict | None:
+    """The robust DVF gain over the same samples as the depths (None where the pose has no
+    controller entry)."""
+    nominal = controller_entry(pose.pose_id, pose.rows, pose.rotation, config.control)
+    if nominal is None:
+        return None
+    table = pose.distribution.table
+    sampled = [list(zip(table.direction, table.mode, *values.T)) for values in pose.distribution.sample_values(n, seed)]
+    return robust_gain(sampled, pose.rotation, config.control, nominal["dvf_gain_ns_per_m"])
 
 
 def _depths(structures: list[ToolTipDynamics], config: ScheduleConfig) -> tuple[np.ndarray, np.ndarray]:

@@ -107,6 +107,12 @@ def test_the_robust_setting_raises_the_guaranteed_depth_where_the_model_is_uncer
     assert by_id["x1000"]["robust"]["tuning"] == "robust"
     gain = by_id["x1000"]["robust"]["critical_depth_with_absorber_p95_mm"] / by_id["x1000"]["robust"]["nominal_tuning_with_absorber_p95_mm"]
     assert gain > 1.05
+    for e in entries:  # the DVF gain that keeps its 6 dB margin in 95 % of the samples
+        c = e["robust"]["controller"]
+        assert c["dvf_gain_ns_per_m"] <= e["controller"]["dvf_gain_ns_per_m"]
+        assert c["dvf_gain_ns_per_m"] <= c["max_stable_gain_q05_ns_per_m"] / 10 ** (6 / 20) * (1 + 1e-12)
+    far = by_id["x1000"]["robust"]["controller"]
+    assert far["nominal_gain_keeps_margin_pct"] < 90 and far["dvf_gain_ns_per_m"] < 0.9 * by_id["x1000"]["controller"]["dvf_gain_ns_per_m"]
 
 
 def test_schedule_sweep_and_service_engine_give_the_same_robust_entries(robust_schedule, model_dir):

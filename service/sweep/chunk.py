@@ -177,6 +177,7 @@ def _robust_columns(robust) -> dict:
         "robust_target_hz": robust.absorber.target_hz,
         "robust_field_mt": robust.absorber.field_t * 1e3,
         "critical_depth_with_absorber_p95_mm": _mm(robust.depth_with_absorber_p95_m),
+        "robust_dvf_gain_ns_per_m": robust.controller["dvf_gain_ns_per_m"] if robust.controller else None,
     }
 
 

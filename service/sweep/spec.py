@@ -32,6 +32,7 @@ RESULT_COLUMNS = (
     "robust_target_hz",
     "robust_field_mt",
     "critical_depth_with_absorber_p95_mm",
+    "robust_dvf_gain_ns_per_m",
     "actuator_direction",
     "dvf_gain_ns_per_m",
     "gain_margin_db",
