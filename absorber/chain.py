@@ -35,6 +35,7 @@ from posedyn.dynamics import ToolTipDynamics
 from posedyn.errors import InputError, check_choice
 from posedyn.robot import pose_rotation
 from posedyn.stability import Cut, StabilityResult, critical_points, zoa
+from posedyn.stability.critical import REL_TOL
 from posedyn.table import ModalTable
 from posedyn.uncertainty import ModalDistribution, distributions_from_table
 
@@ -254,7 +255,7 @@ def schedule_poses(poses: list[PoseModes], config: ScheduleConfig) -> list[PoseS
         entries.append((depth, chatter_hz, AbsorberEntry(config.policy, target, setting.field_t, current, feasible, interval)))
         structures.append(coupled(pose.dyn, config, setting.field_t))
     with_absorber = critical_points(structures, config.cut, config.rpm, config.steps, frequencies=False)
-    robust = robust_entries(poses, [e[1] for e in entries], [e[2] for e in entries], config) if config.robust_samples else [None] * len(poses)
+    robust = robust_entries(poses, [e[1] for e in entries], [e[2] for e in entries], bare, with_absorber, config) if config.robust_samples else [None] * len(poses)
     out = []
     for pose, (depth, chatter_hz, absorber), structure, result, result_with, guaranteed in zip(poses, entries, structures, bare, with_absorber, robust):
         out.append(PoseSchedule(
@@ -292,39 +293,76 @@ def lower95(depths_m: np.ndarray) -> tuple[float, float]:
     return max(mean - Z95 * std, 0.0), std / mean
 
 
-def robust_entries(poses: list[PoseModes], chatter_hz: list[float], nominal: list[AbsorberEntry], config: ScheduleConfig) -> list[RobustEntry | None]:
-    """The guaranteed depth of every pose with a distribution (None for the others).
+def robust_entries(poses: list[PoseModes], chatter_hz: list[float], nominal: list[AbsorberEntry], bare: list[StabilityResult],
+                   with_absorber: list[StabilityResult], config: ScheduleConfig) -> list[RobustEntry | None]:
+    """The guaranteed depth of every pose with a distribution (None for the others), given the
+    chain's nominal entries and verified results.
 
     n = config.robust_samples Latin-hypercube samples of the pose's modes, the same for every
-    setting (common random numbers), each through the converged engine: bare, and with the
-    absorber at the nominal field. The robust target is screened with the zeroth-order depth at
-    the speed (cheap; `zoa.depth_at_speed` on the absorber band) over ROBUST_CANDIDATES targets
-    across the chatter mode's uncertainty, on a second set of samples; the best candidate is then
-    judged by the engine on the first set and kept only if it guarantees more than the nominal
-    setting there."""
+    setting (common random numbers), each through the converged engine (`_sample_depths`): bare,
+    and with the absorber at the nominal field. The robust target is screened with the
+    zeroth-order depth at the speed (cheap; `zoa.depth_at_speed` on the absorber band) over
+    ROBUST_CANDIDATES targets across the chatter mode's uncertainty, on a second set of samples;
+    the best candidate is then judged by the engine on the first set and kept only if it
+    guarantees more than the nominal setting there."""
     n, seed = config.robust_samples, config.robust_seed
     todo = [i for i, p in enumerate(poses) if p.distribution is not None]
     samples = {i: poses[i].distribution.sample_dynamics(n, seed) for i in todo}
-    bare = _depths([d for i in todo for d in samples[i]], config)
-    nominal_coupled = _depths([coupled(d, config, nominal[i].field_t) for i in todo for d in samples[i]], config)
+    bare_check = _needs_verification([poses[i].dyn for i in todo], [bare[i] for i in todo], config)
+    coupled_check = _needs_verification([coupled(poses[i].dyn, config, nominal[i].field_t) for i in todo], [with_absorber[i] for i in todo], config)
+    bare_depths = _sample_depths([samples[i] for i in todo], bare_check, config)
+    nominal_coupled = _sample_depths([[coupled(d, config, nominal[i].field_t) for d in samples[i]] for i in todo], coupled_check, config)
     # screened on other samples than those it is judged on: the choice is not fitted to its judges
     candidates = {i: _robust_candidate(poses[i], poses[i].distribution.sample_dynamics(n, seed + 1), chatter_hz[i], nominal[i], config) for i in todo}
-    judged = [i for i in todo if candidates[i] is not None]
-    robust_coupled = _depths([coupled(d, config, candidates[i].field_t) for i in judged for d in samples[i]], config)
+    judged = [k for k, i in enumerate(todo) if candidates[i] is not None]
+    robust_coupled = _sample_depths([[coupled(d, config, candidates[todo[k]].field_t) for d in samples[todo[k]]] for k in judged], coupled_check[judged], config)
     out: list[RobustEntry | None] = [None] * len(poses)
     for k, i in enumerate(todo):
-        part = slice(k * n, (k + 1) * n)
-        depth_p95, cv = lower95(bare[0][part])
-        nominal_p95, _ = lower95(nominal_coupled[0][part])
-        ok = bool(bare[1][part].all() and nominal_coupled[1][part].all())
+        depth_p95, cv = lower95(bare_depths[0][k])
+        nominal_p95, _ = lower95(nominal_coupled[0][k])
+        ok = bool(bare_depths[1][k].all() and nominal_coupled[1][k].all())
         tuning, entry, best = "nominal", nominal[i], nominal_p95
-        if i in judged:
-            mine = slice(judged.index(i) * n, (judged.index(i) + 1) * n)
-            robust_p95, _ = lower95(robust_coupled[0][mine])
+        if k in judged:
+            j = judged.index(k)
+            robust_p95, _ = lower95(robust_coupled[0][j])
             if robust_p95 > nominal_p95:
-                tuning, entry, best, ok = "robust", candidates[i], robust_p95, ok and bool(robust_coupled[1][mine].all())
+                tuning, entry, best, ok = "robust", candidates[i], robust_p95, ok and bool(robust_coupled[1][j].all())
         out[i] = RobustEntry(n, depth_p95, cv, tuning, entry, best, nominal_p95, ok, _robust_controller(poses[i], n, seed, config))
     return out
+
+
+#: Samples are solved without the engine's verification (2x its cost bare, 13x with the absorber
+#: coupled) where the pose's nominal structure, solved so, gives its verified depth within the
+#: engine's accuracy (the same branch: a missed one lies further off).
+VERIFY_AGREEMENT = REL_TOL
+
+
+def _needs_verification(structures: list[ToolTipDynamics], verified: list[StabilityResult], config: ScheduleConfig) -> np.ndarray:
+    """Per structure: whether its samples need the verified engine. Without the verification the
+    engine finds the boundary from its seeds only, and seeds never start on a flip
+    (period-doubling) lobe; where the nominal structure's verified answer came from beyond the
+    seeds, its samples' will too."""
+    if config.steps is not None or not structures:
+        return np.zeros(len(structures), bool)
+    quick = critical_points(structures, config.cut, config.rpm, frequencies=False, verify=False)
+    return np.array([not (q.converged and v.converged and math.isfinite(q.depth_m) and abs(q.depth_m / v.depth_m - 1.0) <= VERIFY_AGREEMENT)
+                     if math.isfinite(v.depth_m) else not math.isinf(q.depth_m) for q, v in zip(quick, verified)])
+
+
+def _sample_depths(groups: list[list[ToolTipDynamics]], verify: np.ndarray, config: ScheduleConfig) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """(critical depths m, converged flags) of each group of sampled structures, verified where
+    `verify` says, and any unverified sample that did not converge re-solved verified."""
+    flat = [(g, s) for g, group in enumerate(groups) for s in range(len(group))]
+    results: list[StabilityResult | None] = [None] * len(flat)
+    for check in (False, True):
+        idx = [q for q, (g, _) in enumerate(flat) if (check or not verify[g]) and (results[q] is None or results[q].converged is False)]
+        if idx:
+            solved = critical_points([groups[flat[q][0]][flat[q][1]] for q in idx], config.cut, config.rpm, config.steps, frequencies=False, verify=check)
+            for q, r in zip(idx, solved):
+                results[q] = r
+    depths = [np.array([results[q].depth_m for q, (g, _) in enumerate(flat) if g == k]) for k in range(len(groups))]
+    converged = [np.array([results[q].converged is not False for q, (g, _) in enumerate(flat) if g == k]) for k in range(len(groups))]
+    return depths, converged
 
 
 def _robust_controller(pose: PoseModes, n: int, seed: int, config: ScheduleConfig) -> dict | None:
@@ -336,14 +374,6 @@ def _robust_controller(pose: PoseModes, n: int, seed: int, config: ScheduleConfi
     table = pose.distribution.table
     sampled = [list(zip(table.direction, table.mode, *values.T)) for values in pose.distribution.sample_values(n, seed)]
     return robust_gain(sampled, pose.rotation, config.control, nominal["dvf_gain_ns_per_m"])
-
-
-def _depths(structures: list[ToolTipDynamics], config: ScheduleConfig) -> tuple[np.ndarray, np.ndarray]:
-    """(critical depths m, converged flags) of sampled structures at the config's cut and speed.
-    Not re-verified at the answer's resolution (`critical_points(verify=False)`: 2x the cost bare,
-    13x with the absorber coupled); the nominal structure's result, verified, is the entry's."""
-    results = critical_points(structures, config.cut, config.rpm, config.steps, frequencies=False, verify=False)
-    return np.array([r.depth_m for r in results]), np.array([r.converged is not False for r in results])
 
 
 def _robust_candidate(pose: PoseModes, samples: list[ToolTipDynamics], chatter_hz: float, nominal: AbsorberEntry, config: ScheduleConfig) -> AbsorberEntry | None:

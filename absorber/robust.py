@@ -34,10 +34,14 @@ import numpy as np
 from scipy.optimize import minimize
 from scipy.stats import norm, qmc
 
+from absorber.coupling import with_absorber
 from absorber.tuning import BOUNDS, Host, Tuning
-from posedyn.errors import InputError, check_positive
+from posedyn.dynamics import ToolTipDynamics
+from posedyn.errors import InputError, check_choice, check_positive
+from posedyn.stability import critical_points
 from posedyn.stability.cutting import Cut, force_matrix, mean_force_matrix
 from posedyn.stability.zoa import branches_from_eigenvalues, depth_at_speed
+from posedyn.table import Mode
 
 #: Two-sided 95 % normal interval: mean -+ 1.96 std.
 Z95 = float(norm.ppf(0.975))
@@ -136,6 +140,8 @@ class LimitStatistics:
     nominal_m: np.ndarray
     force_upper95_n_per_m: np.ndarray
     force_nominal_n_per_m: np.ndarray
+    method: tuple = ()  # per speed: "zoa", "sdm<steps>" or "engine"
+    zoa_deviation: np.ndarray | None = None  # per speed: the nominal structure's zeroth-order limit / the engine's - 1 (NaN: not checked)
 
     @property
     def cv(self) -> np.ndarray:
@@ -164,10 +170,42 @@ def _force_per_depth(k, fn, zeta, tuning: Tuning, nominal: Host, teeth: int, rpm
     return np.abs(actuator_force_frf(k, fn, zeta, omega, tuning, nominal)) @ harmonics
 
 
+#: A cheaper method is trusted at a speed where it gives the nominal structure's limit within
+#: this of the converged engine (`method="auto"`).
+METHOD_TOLERANCE = 0.02
+#: The semi-discretization's steps per delay tried after the zeroth order, cheapest first.
+SDM_STEPS = (40, 80, 160)
+METHODS = ("auto", "zoa", "engine")
+
+
+def engine_structures(k, fn, zeta, tuning: Tuning | None, nominal: Host) -> list[ToolTipDynamics] | None:
+    """Hosts (k, fn, zeta) flexible in y, with the TMD tuned for `nominal` coupled as an extra
+    degree of freedom, for the converged engine; None for the inerter layouts (their inerter
+    networks have massless internal nodes, which a modal model of the structure does not hold)."""
+    if tuning is not None and tuning.layout != "tmd":
+        return None
+    hosts = [ToolTipDynamics.from_modes(y=[Mode(float(f), float(z), float(kk))]) for kk, f, z in zip(k, fn, zeta)]
+    if tuning is None:
+        return hosts
+    m = tuning.mass_ratio * nominal.mass_kg
+    k_o = m * (tuning.gamma * 2.0 * math.pi * nominal.fn_hz) ** 2
+    return [with_absorber(h, m, k_o, tuning.zeta_a, directions=("y",)) for h in hosts]
+
+
 def monte_carlo_limits(uncertainty: HostUncertainty, tuning: Tuning | None, cut: Cut, rpm, samples: int = 500, seed: int = 0,
-                       force_harmonics: np.ndarray | None = None) -> LimitStatistics:
+                       force_harmonics: np.ndarray | None = None, method: str = "auto") -> LimitStatistics:
     """The stability limit of every sample at every speed, summarised per speed; with an absorber
-    and the cut's force harmonics (`cutting_force_harmonics`), the actuator force too."""
+    and the cut's force harmonics (`cutting_force_harmonics`), the actuator force too.
+
+    `method`: "zoa" the zeroth-order approximation (seed 002's eq. 12, vectorised over the
+    samples) at every speed; "engine" the converged engine (`posedyn.stability.critical_points`,
+    verified) at every speed; "auto", per speed, the cheapest of the zeroth order and the
+    semi-discretization at SDM_STEPS that gives the nominal structure's limit within
+    METHOD_TOLERANCE of the engine's, else the engine (the zeroth order misses lobe peaks and
+    flip lobes by 5-50 % on seed 002's host). Where the engine does not converge on the nominal
+    structure, the finest semi-discretization stands in for it. The inerter layouts have no engine model (their
+    networks have massless internal nodes): zeroth order at every speed, `zoa_deviation` NaN."""
+    check_choice("method", method, METHODS)
     h_yy = mean_force_matrix(cut)[1, 1]
     nominal = uncertainty.nominal
     omega = chatter_grid(nominal)
@@ -177,13 +215,42 @@ def monte_carlo_limits(uncertainty: HostUncertainty, tuning: Tuning | None, cut:
     rpm = np.atleast_1d(np.asarray(rpm, dtype=float))
     depths = np.array([depth_at_speed(b, cut.teeth, r) for r in rpm])  # (speeds, samples)
     nominal_m = np.array([depth_at_speed(b0, cut.teeth, r)[0] for r in rpm])
+    used = np.array(["zoa"] * len(rpm), dtype=object)
+    deviation = np.full(len(rpm), np.nan)
+    one = engine_structures([nominal.k_n_per_m], [nominal.fn_hz], [nominal.zeta], tuning, nominal)
+    if method != "zoa" and one is not None:
+        results = critical_points(one * len(rpm), cut, rpm, frequencies=False)
+        converged = np.array([r.depth_m for r in results])
+        failed = np.flatnonzero([not r.converged for r in results])
+        if len(failed):  # the engine could not answer there (seen at a flip-lobe peak): the finest semi-discretization is the reference
+            converged[failed] = [r.depth_m for r in critical_points(one * len(failed), cut, rpm[failed], SDM_STEPS[-1], frequencies=False)]
+        deviation = nominal_m / converged - 1.0
+        todo = np.flatnonzero(~(np.abs(deviation) <= METHOD_TOLERANCE)) if method == "auto" else np.arange(len(rpm))
+        structures = engine_structures(k, fn, zeta, tuning, nominal) if len(todo) else None
+        for steps in SDM_STEPS if method == "auto" else ():
+            if not len(todo):
+                break
+            sdm = np.array([r.depth_m for r in critical_points(one * len(todo), cut, rpm[todo], steps, frequencies=False)])
+            good = todo[np.abs(sdm / converged[todo] - 1.0) <= METHOD_TOLERANCE]
+            if len(good):
+                results = critical_points(structures * len(good), cut, np.repeat(rpm[good], samples), steps, frequencies=False)
+                depths[good] = np.array([r.depth_m for r in results]).reshape(len(good), samples)
+                nominal_m[good] = sdm[np.isin(todo, good)]
+                used[good] = f"sdm{steps}"
+                todo = np.setdiff1d(todo, good)
+        if len(todo):  # method "engine", or no cheaper method agrees (the engine then converged: its failures have the finest SDM agree)
+            results = critical_points(structures * len(todo), cut, np.repeat(rpm[todo], samples), frequencies=False)
+            depths[todo] = np.array([r.depth_m for r in results]).reshape(len(todo), samples)
+            nominal_m[todo] = converged[todo]
+            used[todo] = "engine"
     force_upper, force_nominal = np.full(len(rpm), np.nan), np.full(len(rpm), np.nan)
     if tuning is not None and force_harmonics is not None:
         for i, r in enumerate(rpm):
             per_sample = _force_per_depth(k, fn, zeta, tuning, nominal, cut.teeth, r, force_harmonics)
             force_upper[i] = per_sample.mean() + Z95 * per_sample.std(ddof=1)
             force_nominal[i] = _force_per_depth([nominal.k_n_per_m], [nominal.fn_hz], [nominal.zeta], tuning, nominal, cut.teeth, r, force_harmonics)[0]
-    return LimitStatistics(rpm, depths.mean(axis=1), depths.std(axis=1, ddof=1), np.quantile(depths, 0.05, axis=1), nominal_m, force_upper, force_nominal)
+    return LimitStatistics(rpm, depths.mean(axis=1), depths.std(axis=1, ddof=1), np.quantile(depths, 0.05, axis=1), nominal_m, force_upper, force_nominal,
+                           tuple(used), deviation)
 
 
 def robust_tuning(uncertainty: HostUncertainty, nominal: Tuning, cut: Cut, rpm, samples: int = 250, seed: int = 0, max_evaluations: int = 80,

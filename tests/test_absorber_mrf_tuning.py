@@ -14,7 +14,9 @@ from absorber.robust import HostUncertainty, monte_carlo_limits
 from absorber.mrf import MRFAbsorber
 from absorber.tuning import LAYOUTS, Host, Tuning, absolute_limit_m, min_real_part, tune_den_hartog, tune_sims, uncontrolled_min_real_part
 from posedyn.errors import InputError
+from posedyn.dynamics import ToolTipDynamics
 from posedyn.stability import Cut, mean_force_matrix
+from posedyn.table import Mode
 
 
 def test_seed004_absorber_matches_its_design(datasets):
@@ -158,8 +160,32 @@ def test_monte_carlo_without_spread_is_the_nominal_limit_and_the_cli_prints_it(d
                           "--layout", "tmd", "--rpm-min", "2700", "--rpm-max", "2700", "--rpm-steps", "1", "--json"], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     row = json.loads(out.stdout)[0]
-    assert set(row) == {"rpm", "mean_mm", "std_mm", "cv_pct", "p95_lower_mm", "q05_mm", "nominal_mm", "actuator_force_p95_n", "actuator_force_ratio", "actuator_saturates"}
+    assert set(row) == {"rpm", "mean_mm", "std_mm", "cv_pct", "p95_lower_mm", "q05_mm", "nominal_mm", "actuator_force_p95_n", "actuator_force_ratio", "actuator_saturates", "method", "zoa_deviation_pct"}
     assert row["cv_pct"] == pytest.approx(13.8, abs=1.5) and 0 < row["p95_lower_mm"] < row["mean_mm"]
+
+
+def test_auto_method_checks_the_zeroth_order_against_the_engine_per_speed(datasets):
+    """Seed 002's host: the zeroth order gives the bare limit within 2 % of the converged engine
+    in the absolute-stability region (2700 rpm) but 5 % high at the 1800 rpm lobe peak and 45 %
+    high at 5000 rpm; `auto` keeps it at 2700 and takes the semi-discretization (checked against
+    the engine on the nominal host) at the others. With no spread every sample is the nominal
+    host, so the mean is the nominal limit of the method used."""
+    from posedyn.stability import critical_points
+
+    case = read_host(datasets / "seeds/dogan2024_host_milling.toml")
+    speeds = [1800.0, 2700.0, 5000.0]
+    stats = monte_carlo_limits(case.uncertainty, None, case.cut, speeds, samples=60)
+    assert stats.method == ("sdm40", "zoa", "sdm40")
+    assert abs(stats.zoa_deviation[1]) < 0.02 and stats.zoa_deviation[0] > 0.03 and stats.zoa_deviation[2] > 0.3
+    host = case.uncertainty.nominal
+    engine = [r.depth_m for r in critical_points([ToolTipDynamics.from_modes(y=[Mode(host.fn_hz, host.zeta, host.k_n_per_m)])] * 3, case.cut, speeds)]
+    assert np.allclose(stats.nominal_m, engine, rtol=0.02)
+    zoa_only = monte_carlo_limits(case.uncertainty, None, case.cut, speeds, samples=60, method="zoa")
+    assert zoa_only.lower95_m[2] > 1.3 * stats.lower95_m[2]  # the zeroth order would promise 30 % more at 5000 rpm
+    still = monte_carlo_limits(HostUncertainty(host, 0.0, 0.0, 0.0), None, case.cut, speeds, samples=10)
+    assert np.allclose(still.mean_m, still.nominal_m, rtol=1e-9) and np.all(still.std_m < 1e-9 * still.mean_m)
+    c6 = monte_carlo_limits(case.uncertainty, tune_sims("idva-c6", case.mass_ratio, host.zeta), case.cut, speeds, samples=20)
+    assert c6.method == ("zoa",) * 3 and np.isnan(c6.zoa_deviation).all()  # no engine model of an inerter network
 
 
 def test_robust_tuning_raises_the_guaranteed_depth_where_the_host_is_uncertain(datasets, tmp_path):
@@ -207,7 +233,7 @@ def test_actuator_force_is_the_two_degree_of_freedom_solve_and_follows_seed002_s
     assert harmonics[0] > harmonics[3] > 0  # a half-immersion cut: falling harmonics
     for layout in ("tmd", "idva-c5", "idva-c6"):
         tuned = tune_sims(layout, mu, host.zeta)
-        stats = monte_carlo_limits(case.uncertainty, tuned, cut, [1800.0, 1900.0, 2000.0, 2700.0], samples=500, seed=0, force_harmonics=harmonics)
+        stats = monte_carlo_limits(case.uncertainty, tuned, cut, [1800.0, 1900.0, 2000.0, 2700.0], samples=500, seed=0, force_harmonics=harmonics, method="zoa")
         assert 1.35 < stats.force_ratio[-1] < 1.75, layout
         assert 1.6 < stats.force_ratio[:-1].max() < 2.6, layout
         assert np.all(stats.force_upper95_n_per_m > 0) and 0 < stats.force_upper95_n[-1] < case.force_limit_n  # the seed's 27 N actuator does not saturate there

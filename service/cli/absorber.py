@@ -14,7 +14,7 @@ from rich.table import Table
 
 from absorber.chain import ScheduleConfig, schedule_entries
 from absorber.files import read_absorber, read_actuator, read_host
-from absorber.robust import cutting_force_harmonics, monte_carlo_limits, robust_tuning
+from absorber.robust import METHODS, cutting_force_harmonics, monte_carlo_limits, robust_tuning
 from absorber.tuning import Host, absolute_limit_m, min_real_part, tune_sims, uncontrolled_min_real_part
 from posedyn.errors import InputError
 from posedyn.io.atomic import write_text_atomic
@@ -86,6 +86,7 @@ def robust(
     rpm_steps: int = typer.Option(..., "--rpm-steps", min=1),
     samples: int = typer.Option(500, "--samples", min=10),
     seed: int = typer.Option(0, "--seed"),
+    method: str = typer.Option("auto", "--method", help="auto: per speed the cheapest of the zeroth order and the semi-discretization that gives the nominal limit within 2 % of the converged engine, else the engine; zoa: seed 002's eq. 12 everywhere; engine: the converged engine everywhere."),
     robust_tuning_: bool = typer.Option(False, "--robust-tuning", help="Also tune the absorber for the best 95 % lower bound over the speeds and print its rows beside the nominal tuning's."),
     as_json: bool = typer.Option(False, "--json"),
 ):
@@ -99,6 +100,8 @@ def robust(
         raise InputError("--mass-ratio or [absorber] mass_ratio in the host file", got="neither", file=str(host_file), column="--mass-ratio")
     if robust_tuning_ and layout is None:
         raise InputError("--layout with --robust-tuning", got="no layout", column="--robust-tuning")
+    if method not in METHODS:
+        raise InputError("--method " + ", ".join(METHODS), got=method, column="--method")
     speeds = np.linspace(rpm_min, rpm_max, rpm_steps)
     harmonics = None if case.feed_per_tooth_m is None else cutting_force_harmonics(cut, case.feed_per_tooth_m)
     tunings = {"nominal": None if layout is None else tune_sims(layout.value, mu, uncertainty.nominal.zeta)}
@@ -106,21 +109,23 @@ def robust(
         tunings["robust"] = robust_tuning(uncertainty, tunings["nominal"], cut, speeds, seed=seed + 1, force_harmonics=harmonics, force_limit_n=case.force_limit_n)
     out = {}
     for name, tuning in tunings.items():
-        stats = monte_carlo_limits(uncertainty, tuning, cut, speeds, samples, seed, force_harmonics=harmonics)
+        stats = monte_carlo_limits(uncertainty, tuning, cut, speeds, samples, seed, force_harmonics=harmonics, method=method)
         out[name] = [
             {"rpm": float(r), "mean_mm": finite_or_none(m * 1e3), "std_mm": finite_or_none(s * 1e3), "cv_pct": finite_or_none(100 * cv),
              "p95_lower_mm": finite_or_none(lo * 1e3), "q05_mm": finite_or_none(q * 1e3), "nominal_mm": finite_or_none(n * 1e3),
              "actuator_force_p95_n": finite_or_none(f), "actuator_force_ratio": finite_or_none(ratio),
-             "actuator_saturates": None if case.force_limit_n is None or not math.isfinite(f) else bool(f > case.force_limit_n)}
-            for r, m, s, cv, lo, q, n, f, ratio in zip(stats.rpm, stats.mean_m, stats.std_m, stats.cv, stats.lower95_m, stats.q05_m, stats.nominal_m,
-                                                       stats.force_upper95_n, stats.force_ratio)
+             "actuator_saturates": None if case.force_limit_n is None or not math.isfinite(f) else bool(f > case.force_limit_n),
+             "method": used, "zoa_deviation_pct": finite_or_none(100 * dev)}
+            for r, m, s, cv, lo, q, n, f, ratio, used, dev in zip(stats.rpm, stats.mean_m, stats.std_m, stats.cv, stats.lower95_m, stats.q05_m, stats.nominal_m,
+                                                                   stats.force_upper95_n, stats.force_ratio, stats.method, stats.zoa_deviation)
         ]
     if as_json:
         print_json(out["nominal"] if not robust_tuning_ else {name: {"tuning": _tuning_json(tunings[name]), "rows": rows} for name, rows in out.items()})
         return
     for name, rows in out.items():
         title = f"{layout.value if layout else 'no absorber'} ({name} tuning {_tuning_json(tunings[name])}), {samples} samples" if layout else f"no absorber, {samples} samples"
-        table = Table("rpm", "mean mm", "std mm", "cv %", "95 % lower mm", "5 % quantile mm", "nominal mm", "actuator force 95 % N", "force / ideal", "saturates", title=title)
+        table = Table("rpm", "mean mm", "std mm", "cv %", "95 % lower mm", "5 % quantile mm", "nominal mm", "actuator force 95 % N", "force / ideal", "saturates",
+                      "method", "zoa vs engine %", title=title)
         for row in rows:
             table.add_row(*(_fmt(v) for v in row.values()))
         console.print(table)
@@ -209,6 +214,8 @@ def schedule(
 def _fmt(value):
     if isinstance(value, bool):
         return "yes" if value else "no"
+    if isinstance(value, str):
+        return value
     return "-" if value is None else f"{value:.4g}"
 
 
