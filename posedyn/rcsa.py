@@ -1,0 +1,88 @@
+"""Receptance coupling substructure analysis with full receptance matrices (seed 003 section 3).
+
+Every receptance is a (frequencies, 4, 4) array in seed 003 eq. 3's order: rows (x, theta_x, y,
+theta_y) of the response point, columns (F_x, M_x, F_y, M_y) of the excitation point, so the x-y
+cross terms are kept. The tool A (free-free; "1" its tip, "2" its coupling end) is joined to the
+spindle-holder side B (its receptance B22 at the joint) through a connection of complex
+stiffness K (translation and rotation, seed 003's [K]):
+
+    C11 = A11 - A12 (A22 + K^-1 + B22)^-1 A21                           (coupling)
+    B22 + K1^-1 = A21,T1 (A11,T1 - C11,T1)^-1 A12,T1 - A22,T1          (decoupling, reference tool T1)
+    C11,T2 = A11,T2 - A12,T2 (A22,T2 + dK^-1 + [B22 + K1^-1])^-1 A21,T2,  dK^-1 = K2^-1 - K1^-1
+                                                                        (seed 003 eq. 4)
+
+Rotations are theta = dw/dz with z from the tool tip towards the holder; M is the moment that
+does work on theta. Where the assembly's rotational receptances are not measured, seed 003
+Appendix A estimates them by first-order finite differences from displacement-to-force FRFs
+measured at the tip (point 1) and at a point a distance S up the tool (point a): a moment M at 1
+is the couple -M / S at 1 and +M / S at a, a rotation the difference of displacements over S:
+
+    N_1p,1q = (H_ap,1q - H_1p,1q) / S          L_1p,1q = (H_1p,aq - H_1p,1q) / S
+    P_1p,1q = (H_ap,aq - H_ap,1q - H_1p,aq + H_1p,1q) / S^2              (p, q in x, y)
+
+(seed 003 eqs. A.1-A.12, written without assuming reciprocity: the robot's cross terms need
+not be symmetric). The estimate is that of the point S / 2 up the tool, first order in S.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from posedyn.errors import InputError
+
+#: Seed 003 eq. 3's order: (x, theta_x, y, theta_y); the displacement rows and force columns.
+DISPLACEMENT = [0, 2]
+
+
+def couple(a11: np.ndarray, a12: np.ndarray, a21: np.ndarray, a22: np.ndarray, holder22: np.ndarray, connection_compliance: np.ndarray) -> np.ndarray:
+    """C11 = A11 - A12 (A22 + K^-1 + B22)^-1 A21, per frequency."""
+    return a11 - a12 @ np.linalg.solve(a22 + connection_compliance + holder22, a21)
+
+
+def decouple(reference_tip: np.ndarray, tool: dict[str, np.ndarray]) -> np.ndarray:
+    """B22 + K1^-1, the holder side with the reference tool's connection, from the reference
+    assembly's tip receptance C11,T1 and the reference tool's receptances ("11", "12", "21", "22")."""
+    return tool["21"] @ np.linalg.solve(tool["11"] - reference_tip, tool["12"]) - tool["22"]
+
+
+def tool_change(reference_tip: np.ndarray, reference_tool: dict[str, np.ndarray], target_tool: dict[str, np.ndarray],
+                compliance_change: np.ndarray | None = None) -> np.ndarray:
+    """The target tool's assembly tip receptance C11,T2 from the reference tool's (seed 003 eq. 4);
+    `compliance_change` = K2^-1 - K1^-1 (None: the same connection)."""
+    holder = decouple(reference_tip, reference_tool)
+    change = np.zeros_like(holder) if compliance_change is None else np.broadcast_to(compliance_change, holder.shape)
+    return couple(target_tool["11"], target_tool["12"], target_tool["21"], target_tool["22"], holder, change)
+
+
+def connection_compliance(translational_n_per_m: float, rotational_nm_per_rad: float, loss_factor: float = 0.0) -> np.ndarray:
+    """K^-1 of a connection with the same translational and rotational stiffness in x and y and
+    hysteretic damping (K (1 + i eta)), (4, 4); an infinite stiffness is a rigid joint (0)."""
+    out = np.zeros((4, 4), dtype=complex)
+    for i, k in ((0, translational_n_per_m), (1, rotational_nm_per_rad), (2, translational_n_per_m), (3, rotational_nm_per_rad)):
+        if not k > 0:
+            raise InputError("connection stiffnesses > 0", got=k, column="connection")
+        out[i, i] = 0.0 if np.isinf(k) else 1.0 / (k * (1.0 + 1j * loss_factor))
+    return out
+
+
+def finite_difference_tip(measured: np.ndarray, spacing_m: float) -> np.ndarray:
+    """The tip's full receptance (f, 4, 4) from the 16 displacement-to-force FRFs of seed 003
+    eq. 5, `measured` (f, 4, 4) with rows and columns (1x, 1y, ax, ay), points S = `spacing_m`
+    apart (seed 003 Appendix A; formulas in the module docstring)."""
+    if not spacing_m > 0:
+        raise InputError("a spacing S > 0 between the tip and the second point", got=spacing_m, column="spacing_m")
+    measured = np.asarray(measured)
+    if measured.shape[-2:] != (4, 4):
+        raise InputError("displacement FRFs between (1x, 1y, ax, ay), shape (..., 4, 4)", got=measured.shape, column="measured")
+    S = spacing_m
+    out = np.zeros(measured.shape, dtype=complex)
+    for p in range(2):
+        for q in range(2):
+            h11, h1a = measured[..., p, q], measured[..., p, 2 + q]
+            ha1, haa = measured[..., 2 + p, q], measured[..., 2 + p, 2 + q]
+            r, c = 2 * p, 2 * q
+            out[..., r, c] = h11
+            out[..., r + 1, c] = (ha1 - h11) / S  # N
+            out[..., r, c + 1] = (h1a - h11) / S  # L
+            out[..., r + 1, c + 1] = (haa - ha1 - h1a + h11) / S**2  # P
+    return out
