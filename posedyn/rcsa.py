@@ -26,9 +26,12 @@ not be symmetric). The estimate is that of the point S / 2 up the tool, first or
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from posedyn.errors import InputError
+from posedyn.errors import InputError, check_non_negative, check_positive
+from posedyn.tool import Tool, tool_receptances
 
 #: Seed 003 eq. 3's order: (x, theta_x, y, theta_y); the displacement rows and force columns.
 DISPLACEMENT = [0, 2]
@@ -52,6 +55,71 @@ def tool_change(reference_tip: np.ndarray, reference_tool: dict[str, np.ndarray]
     holder = decouple(reference_tip, reference_tool)
     change = np.zeros_like(holder) if compliance_change is None else np.broadcast_to(compliance_change, holder.shape)
     return couple(target_tool["11"], target_tool["12"], target_tool["21"], target_tool["22"], holder, change)
+
+
+@dataclass(frozen=True)
+class Connection:
+    """The holder-tool joint (seed 003's [K]): translational and rotational stiffness, the same in
+    x and y, with viscous damping constants (seed 003 section 5.3 gives both)."""
+
+    translational_n_per_m: float
+    rotational_nm_per_rad: float
+    translational_damping_ns_per_m: float = 0.0
+    rotational_damping_nms_per_rad: float = 0.0
+
+    def __post_init__(self):
+        check_positive("translational_n_per_m", self.translational_n_per_m)
+        check_positive("rotational_nm_per_rad", self.rotational_nm_per_rad)
+        check_non_negative("translational_damping_ns_per_m", self.translational_damping_ns_per_m)
+        check_non_negative("rotational_damping_nms_per_rad", self.rotational_damping_nms_per_rad)
+
+    def compliance(self, omega_rad_s: np.ndarray) -> np.ndarray:
+        """K^-1 (f, 4, 4), K = k + i w c on the diagonal."""
+        w = np.atleast_1d(np.asarray(omega_rad_s, dtype=float))
+        out = np.zeros((len(w), 4, 4), dtype=complex)
+        t = 1.0 / (self.translational_n_per_m + 1j * w * self.translational_damping_ns_per_m)
+        r = 1.0 / (self.rotational_nm_per_rad + 1j * w * self.rotational_damping_nms_per_rad)
+        out[:, 0, 0] = out[:, 2, 2] = t
+        out[:, 1, 1] = out[:, 3, 3] = r
+        return out
+
+
+def pivot_map(pivot_m: float) -> np.ndarray:
+    """T (4, 2): the holder's joint moving as a rigid extension of a part that turns about a point
+    `pivot_m` behind the joint (towards the spindle), (x, theta_x, y, theta_y) = T (x, y):
+    theta = -w / pivot (z runs from the tip towards the holder); inf: no rotation at the joint."""
+    if not pivot_m > 0:
+        raise InputError("a pivot distance > 0 (inf: the joint does not turn)", got=pivot_m, column="pivot_m")
+    t = np.zeros((4, 2))
+    t[0, 0] = t[2, 1] = 1.0
+    t[1, 0] = t[3, 1] = -1.0 / pivot_m
+    return t
+
+
+def holder_from_tip(tip_displacement: np.ndarray, tool: dict[str, np.ndarray], connection_compliance: np.ndarray, pivot_m: float) -> np.ndarray:
+    """B22 (f, 4, 4) of the spindle-holder side from the assembly's measured or predicted tip
+    displacement receptances alone (f, 2, 2; x, y with their cross terms), when no rotation is
+    measured: the joint is taken to move as a rigid extension turning about a pivot
+    (`pivot_map`), B22 = T b T^T, and the 2 x 2 joint compliance b follows in closed form. With
+    Q = A22 + K^-1, W = T^T Q^-1 T, U = (A12 Q^-1 T)_disp, V = (T^T Q^-1 A21)_disp and H0 the tip of
+    the tool on a rigid holder, C11 = A11 - A12 (Q + T b T^T)^-1 A21 gives (Woodbury)
+
+        H - H0 = U (b^-1 + W)^-1 V,   b = ([U^-1 (H - H0) V^-1]^-1 - W)^-1.
+
+    An assumption, not seed 003's method (its Appendix A measures a second point): it holds where
+    the holder side's motion at the joint is a rotation about one point (robot modes: the wrist;
+    spindle modes: less so); README gives its error on a model whose holder bends."""
+    T = pivot_map(pivot_m)
+    Q = tool["22"] + connection_compliance
+    Qi_T = np.linalg.solve(Q, np.broadcast_to(T, Q.shape[:-2] + T.shape))
+    Qi_A21 = np.linalg.solve(Q, tool["21"])
+    W = T.T @ Qi_T
+    U = (tool["12"] @ Qi_T)[:, DISPLACEMENT, :]
+    V = (T.T @ Qi_A21)[:, :, DISPLACEMENT]
+    H0 = (tool["11"] - tool["12"] @ Qi_A21)[:, DISPLACEMENT][:, :, DISPLACEMENT]
+    middle = np.linalg.solve(U, np.asarray(tip_displacement) - H0) @ np.linalg.inv(V)
+    b = np.linalg.inv(np.linalg.inv(middle) - W)
+    return T @ b @ T.T
 
 
 def connection_compliance(translational_n_per_m: float, rotational_nm_per_rad: float, loss_factor: float = 0.0) -> np.ndarray:
@@ -86,3 +154,17 @@ def finite_difference_tip(measured: np.ndarray, spacing_m: float) -> np.ndarray:
             out[..., r, c + 1] = (h1a - h11) / S  # L
             out[..., r + 1, c + 1] = (haa - ha1 - h1a + h11) / S**2  # P
     return out
+
+
+def target_tip(tip_displacement: np.ndarray, omega_rad_s: np.ndarray, reference: tuple[Tool, Connection], target: tuple[Tool, Connection],
+               pivot_m: float) -> np.ndarray:
+    """The target tool's tip displacement receptances (f, 2, 2; x, y and cross terms) from the
+    reference tool's assembly tip displacement receptances alone (measured, or a pose model's
+    prediction): the holder side by `holder_from_tip`, then the target coupled through its own
+    joint (seed 003 eq. 4 with B22 + K1^-1 split into B22 and the reference joint)."""
+    ref_tool = tool_receptances(reference[0], omega_rad_s)
+    ref_joint = reference[1].compliance(omega_rad_s)
+    holder = holder_from_tip(tip_displacement, ref_tool, ref_joint, pivot_m)
+    tool = tool_receptances(target[0], omega_rad_s)
+    coupled = couple(tool["11"], tool["12"], tool["21"], tool["22"], holder, target[1].compliance(omega_rad_s))
+    return coupled[:, DISPLACEMENT][:, :, DISPLACEMENT]
