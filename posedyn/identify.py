@@ -198,3 +198,17 @@ def matrix_modal_fit(frequency_hz, H: dict, fmin_hz=None, fmax_hz=None, max_orde
             right, left = -right, -left
         out.append({"fn_hz": m.fn_hz, "zeta": m.zeta, "shape_right": right.tolist(), "shape_left": left.tolist()})
     return out, {n: fit[:, i] for i, n in enumerate(names)}
+
+
+def complex_modes_frf(fn_hz, zeta, left, right, omega_rad_s) -> np.ndarray:
+    """FRF matrix (f, p, q) of complex modes (seed 003's MDOF model, its Table B1 form):
+    H = sum_r L_r R_r^T / (i w - lambda_r) + conj(L_r R_r^T) / (i w - conj(lambda_r)),
+    lambda_r = -zeta_r w_r + i w_r sqrt(1 - zeta_r^2); `left` (modes, p), `right` (modes, q)."""
+    w = np.asarray(omega_rad_s, dtype=float)[:, None, None]
+    out = 0.0
+    for fn, z, l, r in zip(fn_hz, zeta, np.asarray(left, complex), np.asarray(right, complex)):
+        wn = 2 * math.pi * fn
+        lam = -z * wn + 1j * wn * math.sqrt(1 - z * z)
+        residue = np.outer(l, r)
+        out = out + residue / (1j * w - lam) + np.conj(residue) / (1j * w - np.conj(lam))
+    return out

@@ -286,3 +286,45 @@ def test_tool_change_cli_with_the_same_tool_gives_back_the_reference_modes(tmp_p
         changed = sorted(m.fn_hz for m in pcd.modes("P5", d))
         assert changed[0] == pytest.approx(want[0][0], rel=5e-3)  # the robot mode stays
         assert 0.005 < abs(changed[1] / 2400 - 1) < 0.05  # the mode on the tool's side moves (a softer joint: 2400 -> 2381 Hz)
+
+
+def test_seed003_target_tool_at_the_representative_posture(datasets):
+    """Seed 003's own case: its Table B1 modal model of the 16 FRFs (reference rod, representative
+    posture), rotations by its Appendix A finite differences (S = 33.4 mm for the laser-measured
+    robot modes, 20 mm for the accelerometer-measured ones), its two tools and joints (section
+    5.3), the target identified again and its stability for the seed's slot milling (2 teeth,
+    Kt 880 N/mm^2, Kr 52 N/mm^2). Read from its Fig. 29 (posture 2, next to this one): at
+    10,800 rpm 2 mm stable, 3 mm chatter at 935 Hz; here 1.99 mm at 901 Hz. At 7,200 rpm the
+    seed has chatter at 2 mm (916 Hz); here 2.28 mm at 889 Hz. The chatter frequencies within
+    4 %, the limits within about 15 % of the seed's boundary (another posture, an assumed head
+    geometry, finite-difference rotations)."""
+    from posedyn.dynamics import ToolTipDynamics
+    from posedyn.identify import complex_modes_frf
+    from posedyn.io.frf import FRFSet
+    from posedyn.io.params import read_params
+    from posedyn.io.tool_file import read_tool
+    from posedyn.stability import Cut, critical_points
+    from service.cli.fit import fit_table
+
+    table_b1 = read_params(datasets / "seeds/seed003_table_b1.toml")["modes"]
+    fn, zeta = np.array(table_b1["fn_hz"]), np.array(table_b1["zeta_pct"]) / 100
+    left = np.array([[complex(v) for v in row] for row in table_b1["left"]])
+    right = np.array([[complex(v) for v in row] for row in table_b1["right"]]) * table_b1["residue_scale_s_per_kg"]
+    spacing = np.array(table_b1["spacing_mm"]) * 1e-3
+    f = np.linspace(5.0, 1500.0, 6000)
+    omega = 2 * math.pi * f
+    reference_tip = sum(finite_difference_tip(complex_modes_frf(fn[band], zeta[band], left[band], right[band], omega), s)
+                        for band, s in ((spacing > 0.03, 0.0334), (spacing < 0.03, 0.020)))
+    reference, target = read_tool(datasets / "seeds/seed003_reference_tool.toml"), read_tool(datasets / "seeds/seed003_target_tool.toml")
+    change = target[1].compliance(omega) - reference[1].compliance(omega)
+    predicted = tool_change(reference_tip, tool_receptances(reference[0], omega), tool_receptances(target[0], omega), change)
+    H = predicted[:, DISPLACEMENT][:, :, DISPLACEMENT]
+    frf = FRFSet(f, {"h_xx": H[:, 0, 0], "h_xy": H[:, 0, 1], "h_yx": H[:, 1, 0], "h_yy": H[:, 1, 1]}, pose_id="B1", pose={"x_mm": 1800.0, "y_mm": -200.0, "z_mm": 0.0, "beta_deg": 0.0})
+    modes, _ = fit_table([frf])
+    dyn = ToolTipDynamics.from_table(modes, "B1")
+    assert np.sum(dyn.fn_hz > 100) >= 3 and np.sum(dyn.fn_hz < 100) == 5
+    cut = Cut(teeth=2, kt_pa=880e6, kn_pa=52e6, radial_immersion=1.0)
+    fast, slow = critical_points([dyn, dyn], cut, [10800.0, 7200.0])
+    assert 1.5e-3 < fast.depth_m < 3.0e-3 and fast.converged  # 1.99 mm
+    assert fast.chatter_hz == pytest.approx(935.0, rel=0.05)  # 901 Hz
+    assert 1.5e-3 < slow.depth_m < 3.0e-3 and slow.chatter_hz == pytest.approx(916.0, rel=0.05)  # 2.28 mm at 889 Hz
