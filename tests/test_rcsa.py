@@ -304,7 +304,7 @@ def test_seed003_target_tool_at_the_representative_posture(datasets):
     from posedyn.io.params import read_params
     from posedyn.io.tool_file import read_tool
     from posedyn.stability import Cut, critical_points
-    from service.cli.fit import fit_table
+    from posedyn.modal_fit import fit_table
 
     table_b1 = read_params(datasets / "seeds/seed003_table_b1.toml")["modes"]
     fn, zeta = np.array(table_b1["fn_hz"]), np.array(table_b1["zeta_pct"]) / 100
@@ -328,3 +328,34 @@ def test_seed003_target_tool_at_the_representative_posture(datasets):
     assert 1.5e-3 < fast.depth_m < 3.0e-3 and fast.converged  # 1.99 mm
     assert fast.chatter_hz == pytest.approx(935.0, rel=0.05)  # 901 Hz
     assert 1.5e-3 < slow.depth_m < 3.0e-3 and slow.chatter_hz == pytest.approx(916.0, rel=0.05)  # 2.28 mm at 889 Hz
+
+
+def test_schedule_and_the_service_take_a_tool_file(tmp_path, datasets, model_dir):
+    """One tool change for every caller: `posedyn schedule --target-tool` gives the entry of
+    `posedyn schedule --modes` on `posedyn tool-change`'s table, and the service's engine with
+    the same tools the same numbers; its model_version names the tools."""
+    import json
+    import subprocess
+    import sys
+
+    from service.zenoh_service.engine import ScheduleEngine
+
+    poses = tmp_path / "poses.csv"
+    poses.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nP5,1400,0,800,0\n")
+    cut = datasets / "seeds/hou2023_cut.toml"
+    ref, tgt = datasets / "seeds/seed003_reference_tool.toml", datasets / "seeds/seed003_target_tool.toml"
+
+    def posedyn(*args):
+        done = subprocess.run([sys.executable, "-m", "service", *map(str, args)], capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr
+        return done.stdout
+
+    direct = json.loads(posedyn("schedule", model_dir, "--poses", poses, "--cut", cut, "--reference-tool", ref, "--target-tool", tgt, "--json"))[0]
+    posedyn("tool-change", model_dir, "--reference-tool", ref, "--target-tool", tgt, "--poses", poses, "--out", tmp_path / "target.csv")
+    via_table = json.loads(posedyn("schedule", "--modes", tmp_path / "target.csv", "--poses", poses, "--cut", cut, "--json"))[0]
+    assert direct["critical_depth_mm"] == pytest.approx(via_table["critical_depth_mm"], rel=1e-9)
+    assert direct["absorber"]["field_mt"] == pytest.approx(via_table["absorber"]["field_mt"], rel=1e-9)
+    engine = ScheduleEngine(model_dir, cut, tools=(ref, tgt))
+    served = engine.entry({"pose_id": "P5", "x_mm": 1400.0, "y_mm": 0.0, "z_mm": 800.0, "beta_deg": 0.0}, {})
+    assert served["critical_depth_mm"] == pytest.approx(direct["critical_depth_mm"], rel=1e-9)
+    assert "+tool" in engine.model_version

@@ -17,6 +17,8 @@ from absorber.files import read_absorber, read_actuator, read_host
 from absorber.robust import METHODS, cutting_force_harmonics, monte_carlo_limits, robust_tuning
 from absorber.tuning import Host, absolute_limit_m, min_real_part, tune_sims, uncontrolled_min_real_part
 from posedyn.errors import InputError
+from posedyn.io.tool_file import read_tool
+from posedyn.tool_change import tool_changed_table
 from posedyn.io.atomic import write_text_atomic
 from posedyn.io.cut import read_cut
 from posedyn.stability import Cut, mean_force_matrix
@@ -168,6 +170,9 @@ def schedule(
     absorber: Optional[Path] = typer.Option(None, "--absorber", help="Absorber file (default: seed 004's design)."),
     policy: Policy = typer.Option(Policy.match, "--policy"),
     actuator: Optional[Path] = typer.Option(None, "--actuator", help="Actuator file for the controller field (default: seed 000's)."),
+    reference_tool: Optional[Path] = typer.Option(None, "--reference-tool", help="The tool the modes were measured with (tool file; with --target-tool)."),
+    target_tool: Optional[Path] = typer.Option(None, "--target-tool", help="Schedule for this tool: its modes from the reference tool's by receptance coupling (as `posedyn tool-change`)."),
+    pivot_mm: float = typer.Option(150.0, "--pivot-mm", help="With --target-tool: where the holder side turns, behind the holder face."),
     robust: bool = typer.Option(False, "--robust", help="Also the depth a cell can count on: the 95 % lower bound over samples of each pose's modes (the model's predictive distribution, or the table's std columns), bare and with the nominal or robust absorber setting."),
     robust_samples: int = typer.Option(32, "--robust-samples", min=8, max=2000, help="Latin-hypercube samples per pose for --robust."),
     seed: int = typer.Option(0, "--seed", help="Sampling seed for --robust."),
@@ -178,7 +183,13 @@ def schedule(
     the_cut, rpm, steps = read_cut(resolve_cut(cut, model_dir))
     config = ScheduleConfig(the_cut, rpm, read_absorber(absorber), control=read_actuator(actuator), policy=policy.value, steps=steps,
                             robust_samples=robust_samples if robust else 0, robust_seed=seed)
+    if (reference_tool is None) != (target_tool is None):
+        raise InputError("--reference-tool and --target-tool together", got="one of them", column="--target-tool")
+    if target_tool is not None and robust:
+        raise InputError("--robust without --target-tool (the coupled modes carry no predictive distribution yet)", got="both", column="--robust")
     table, distributions = modal_input_for(model_dir, modes, poses, distributions=robust)
+    if target_tool is not None:
+        table = tool_changed_table(table, read_tool(reference_tool), read_tool(target_tool), pivot_mm * 1e-3)
     entries = schedule_entries(table, config, distributions)
     if out is not None:
         _write_json(out, entries)

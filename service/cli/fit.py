@@ -10,75 +10,12 @@ import numpy as np
 import typer
 
 from posedyn.errors import InputError
-from posedyn.identify import direct_modal_parameters, matrix_modal_fit
 from posedyn.identify import lscf_poles
 from posedyn.identify import IdentifiedMode, lsfd
 from posedyn.io import write_modal_table
 from posedyn.io.frf import FRFSet, read_frf
-from posedyn.table import ModalTable, PoseSet
+from posedyn.modal_fit import fit_table
 from service.cli.common import console, print_json
-
-
-def fit_table(frfs, fmin_hz=None, fmax_hz=None, max_order: int = 40, modes: Optional[int] = None):
-    """A ModalTable (one pose per FRF set) and, per pose, what the fits found (for plots)."""
-    rows = {k: [] for k in ("pose_index", "direction", "mode", "fn_hz", "zeta", "k_n_per_m")}
-    std = {"std_fn_hz": [], "std_zeta": [], "std_k_n_per_m": []}
-    cross = {"k_xy_n_per_m": [], "k_yx_n_per_m": []}
-    fits = []
-    has_cross = False
-    for p, frf in enumerate(frfs):
-        f = frf.frequency_hz
-        found = {}
-        if all(n in frf.frf for n in ("h_xx", "h_xy", "h_yx", "h_yy")):
-            coupled, rebuilt = matrix_modal_fit(f, frf.frf, fmin_hz, fmax_hz, max_order)
-            coupled = coupled[:modes] if modes else coupled
-            has_cross = True
-            for m, mode in enumerate(coupled, 1):
-                w2 = (2 * math.pi * mode["fn_hz"]) ** 2
-                (lx, ly), (rx, ry) = mode["shape_left"], mode["shape_right"]
-                for d, k_direct, k_cross, name in (("x", w2 / (lx * rx), w2 / (lx * ry), "k_xy_n_per_m"), ("y", w2 / (ly * ry), w2 / (ly * rx), "k_yx_n_per_m")):
-                    rows["pose_index"].append(p)
-                    rows["direction"].append(d)
-                    rows["mode"].append(m)
-                    rows["fn_hz"].append(mode["fn_hz"])
-                    rows["zeta"].append(mode["zeta"])
-                    rows["k_n_per_m"].append(abs(k_direct))
-                    for key in std:
-                        std[key].append(np.nan)
-                    cross["k_xy_n_per_m"].append(k_cross if name == "k_xy_n_per_m" else np.nan)
-                    cross["k_yx_n_per_m"].append(k_cross if name == "k_yx_n_per_m" else np.nan)
-            found["matrix"] = (coupled, rebuilt)
-        else:
-            for d in "xyz":
-                name = f"h_{d}{d}"
-                if name not in frf.frf:
-                    continue
-                params = direct_modal_parameters(f, frf.frf[name], fmin_hz, fmax_hz, max_order)
-                params = params[:modes] if modes else params
-                found[name] = params
-                for m, par in enumerate(params, 1):
-                    rows["pose_index"].append(p)
-                    rows["direction"].append(d)
-                    rows["mode"].append(m)
-                    for key in ("fn_hz", "zeta", "k_n_per_m"):
-                        rows[key].append(par[key])
-                    for key in std:
-                        std[key].append(par[key])
-                    for key in cross:
-                        cross[key].append(np.nan)
-            if not found:
-                raise InputError("direct FRFs (h_xx, h_yy, h_zz) or the x-y matrix", got=sorted(frf.frf), file=frf.source)
-        fits.append(found)
-    orientation = "abc" if any("a_deg" in f.pose for f in frfs) else "beta"
-    angles = [[f.pose.get(k, 0.0) for k in (("a_deg", "b_deg", "c_deg") if orientation == "abc" else ("beta_deg",))] for f in frfs]
-    poses = PoseSet(
-        pose_id=tuple(f.pose_id for f in frfs),
-        position_mm=np.array([[f.pose.get(k, 0.0) for k in ("x_mm", "y_mm", "z_mm")] for f in frfs]),
-        orientation=orientation,
-        orientation_deg=np.array(angles),
-    )
-    table = ModalTable(poses=poses, std={k: v for k, v in std.items() if not np.all(np.isnan(v))}, cross=cross if has_cross else {}, source=("posedyn fit",) * len(rows["fn_hz"]), **rows)
-    return table, fits
 
 
 def fit(

@@ -45,13 +45,16 @@ def serve(
     plans_in_memory: int = typer.Option(16, "--plans-in-memory", min=1, help="Plans held with a publisher for late joiners."),
     pending_plans: int = typer.Option(4, "--pending-plans", min=1, help="Plans computed at once before 'busy'."),
     stored_plans: int = typer.Option(256, "--stored-plans", min=1, help="Plan files kept in --state-dir."),
+    reference_tool: Optional[Path] = typer.Option(None, "--reference-tool", help="The tool the model's campaign was measured with (tool file; with --target-tool)."),
+    target_tool: Optional[Path] = typer.Option(None, "--target-tool", help="Serve schedules for this tool (its modes by receptance coupling, as `posedyn tool-change`)."),
+    pivot_mm: float = typer.Option(150.0, "--pivot-mm", help="With --target-tool: where the holder side turns, behind the holder face."),
     robust_samples: int = typer.Option(0, "--robust-samples", min=0, max=2000, help="> 0: every entry also carries the guaranteed depth over that many samples of the pose's modes (`robust`; 8 or more; seconds per pose)."),
 ):
     """Serve per-pose schedules over Zenoh until SIGTERM or SIGINT."""
     if mode not in ("peer", "client", "router"):
         raise InputError("--mode peer, client or router", got=mode, column="--mode")
     cut = resolve_cut(cut, model)
-    for path in filter(None, (model, cut, config, absorber, actuator, twin, signing_key)):
+    for path in filter(None, (model, cut, config, absorber, actuator, twin, signing_key, reference_tool, target_tool)):
         if not path.exists():
             raise InputError("an existing file or directory", got="missing", file=str(path))
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
@@ -63,7 +66,9 @@ def serve(
     key = read_key(signing_key) if signing_key else None
     if 0 < robust_samples < 8:
         raise InputError("--robust-samples 0 (off) or 8-2000", got=robust_samples, column="--robust-samples")
-    spec = EngineSpec(model, cut, absorber, actuator, twin, robust_samples)
+    if (reference_tool is None) != (target_tool is None):
+        raise InputError("--reference-tool and --target-tool together", got="one of them", column="--target-tool")
+    spec = EngineSpec(model, cut, absorber, actuator, twin, robust_samples, None if target_tool is None else (reference_tool, target_tool), pivot_mm)
     spec.build()  # every file checked here, with its name in the error, before any process starts
     if not listen and not connect and config is None:
         listen = [DEFAULT_LISTEN]

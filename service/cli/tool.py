@@ -13,17 +13,9 @@ from rich.table import Table
 
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.io import write_modal_table
-from posedyn.io.frf import FRFSet
 from posedyn.io.tool_file import read_tool
-from posedyn.rcsa import target_tip
+from posedyn.tool_change import tool_changed_table
 from service.cli.common import console, modal_table_for, print_json
-from service.cli.fit import fit_table
-
-
-def frequency_grid(dyn: ToolTipDynamics, points: int = 4000) -> np.ndarray:
-    """Frequencies (rad/s) for the coupled FRFs: a log grid from half the lowest mode to three
-    times the highest (the target tool's own modes may lie above the reference's)."""
-    return 2 * math.pi * np.geomspace(0.5 * dyn.fn_hz.min(), 3.0 * dyn.fn_hz.max(), points)
 
 
 def tool_change(
@@ -40,17 +32,7 @@ def tool_change(
     """Predict another tool's tip modes from the reference tool's, pose by pose (RCSA with cross terms)."""
     table = modal_table_for(model_dir, modes, poses)
     reference, target = read_tool(reference_tool), read_tool(target_tool)
-    frfs = []
-    for p, pose_id in enumerate(table.poses.pose_id):
-        dyn = ToolTipDynamics.from_table(table, pose_id)
-        omega = frequency_grid(dyn)
-        H = target_tip(dyn.frf(omega), omega, reference, target, pivot_mm * 1e-3)
-        pose = {name: float(values[p]) for name, values in table.poses.numeric_columns().items()}
-        names = {"h_xx": H[:, 0, 0], "h_yy": H[:, 1, 1]}
-        if np.abs(H[:, 0, 1]).max() > 1e-9 * np.abs(H).max():  # a matrix fit where x and y are coupled (a round tool adds no coupling of its own)
-            names.update(h_xy=H[:, 0, 1], h_yx=H[:, 1, 0])
-        frfs.append(FRFSet(omega / (2 * math.pi), names, pose_id=pose_id, pose=pose, source=f"{target_tool} at {pose_id}"))
-    predicted, _ = fit_table(frfs, max_order=max_order)
+    predicted = tool_changed_table(table, reference, target, pivot_mm * 1e-3, max_order)
     write_modal_table(predicted, out)
     summary = []
     for p, pose_id in enumerate(table.poses.pose_id):

@@ -3,6 +3,7 @@ entry out, from a trained model. No network here; the service runs it in worker 
 
 from __future__ import annotations
 
+import hashlib
 import threading
 from dataclasses import replace
 from pathlib import Path
@@ -14,16 +15,22 @@ from absorber.files import read_absorber, read_actuator
 from posedyn.errors import InputError
 from posedyn.io.cut import read_cut
 from posedyn.io.model_dir import load_model
+from posedyn.io.tool_file import read_tool
 from posedyn.io.twin_file import load_twin
 from posedyn.robot import tool_pose
 from posedyn.table import PoseSet
+from posedyn.tool_change import tool_changed_table
 from service.zenoh_service.protocol import RequestError
 
 
-def model_version(training_hash: str, robust_samples: int) -> str:
-    """What the published entries depend on besides the cut: the model, and the robust sampling
-    (plans kept from a run with other settings are recomputed, not republished)."""
-    return training_hash if not robust_samples else f"{training_hash}+robust{robust_samples}"
+def model_version(training_hash: str, robust_samples: int = 0, tools: tuple[Path, Path] | None = None, pivot_mm: float = 150.0) -> str:
+    """What the published entries depend on besides the cut: the model, the robust sampling and
+    a tool change (plans kept from a run with other settings are recomputed, not republished)."""
+    version = training_hash if not robust_samples else f"{training_hash}+robust{robust_samples}"
+    if tools is not None:
+        digest = hashlib.sha256(b"".join(Path(p).read_bytes() for p in tools) + repr(float(pivot_mm)).encode()).hexdigest()[:12]
+        version += f"+tool{digest}"
+    return version
 
 
 class ScheduleEngine:
@@ -35,10 +42,13 @@ class ScheduleEngine:
     15 deg (`outside_workspace`: a Gaussian process far from its data returns its prior)."""
 
     def __init__(self, model_dir: Path, cut: Path, absorber: Path | None = None, actuator: Path | None = None, twin: Path | None = None,
-                 robust_samples: int = 0):
+                 robust_samples: int = 0, tools: tuple[Path, Path] | None = None, pivot_mm: float = 150.0):
         self.model = load_model(model_dir)
         self.robust_samples = robust_samples
-        self.model_version = model_version(self.model.training_hash_, robust_samples)
+        self.tools = None if tools is None else (read_tool(tools[0]), read_tool(tools[1]), pivot_mm * 1e-3)
+        if self.tools is not None and robust_samples:
+            raise InputError("robust samples without a tool change (the coupled modes carry no predictive distribution yet)", got="both", column="robust_samples")
+        self.model_version = model_version(self.model.training_hash_, robust_samples, tools, pivot_mm)
         self.cut, self.rpm, self.steps = read_cut(cut)
         self.absorber = read_absorber(absorber)
         self.control = read_actuator(actuator)
@@ -58,6 +68,8 @@ class ScheduleEngine:
         config = self.config(cut)
         table = self.model.predict_table(poses)
         distributions = self.model.predict_distributions(poses, table) if config.robust_samples else None
+        if self.tools is not None:
+            table = tool_changed_table(table, *self.tools)
         return schedule_entries(table, config, distributions)[0]
 
     def config(self, cut: dict) -> ScheduleConfig:

@@ -35,12 +35,14 @@ class EngineSpec:
     actuator: Path | None = None
     twin: Path | None = None
     robust_samples: int = 0
+    tools: tuple[Path, Path] | None = None  # (reference, target) tool files: schedules for the target tool
+    pivot_mm: float = 150.0
 
     def build(self) -> ScheduleEngine:
-        return ScheduleEngine(self.model_dir, self.cut, self.absorber, self.actuator, self.twin, self.robust_samples)
+        return ScheduleEngine(self.model_dir, self.cut, self.absorber, self.actuator, self.twin, self.robust_samples, self.tools, self.pivot_mm)
 
     def model_version(self) -> str:
-        return model_version(load_model(self.model_dir).training_hash_, self.robust_samples)
+        return model_version(load_model(self.model_dir).training_hash_, self.robust_samples, self.tools, self.pivot_mm)
 
 
 _engine: ScheduleEngine | None = None
