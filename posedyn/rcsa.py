@@ -168,3 +168,31 @@ def target_tip(tip_displacement: np.ndarray, omega_rad_s: np.ndarray, reference:
     tool = tool_receptances(target[0], omega_rad_s)
     coupled = couple(tool["11"], tool["12"], tool["21"], tool["22"], holder, target[1].compliance(omega_rad_s))
     return coupled[:, DISPLACEMENT][:, :, DISPLACEMENT]
+
+
+def identify_connection(reference_tip: np.ndarray, measured_target_tip: np.ndarray, omega_rad_s: np.ndarray, reference: tuple[Tool, Connection],
+                        target_tool: Tool, initial: Connection) -> Connection:
+    """The target tool's joint from one measurement of its tip (seed 003 section 5.3 tunes it by
+    hand at one posture): the translational and rotational stiffness and damping that make the
+    tool change reproduce the measured direct FRFs (x and y, f x 2 x 2 displacement block), least
+    squares on the complex logarithm's real and imaginary parts (log |H| and phase, equal weight
+    over the band), the parameters in logs, from `initial`. `reference_tip` is the reference
+    assembly's full (f, 4, 4) tip receptance at that posture."""
+    from scipy.optimize import least_squares  # noqa: PLC0415 - only the identification needs it
+
+    ref_tool, target = tool_receptances(reference[0], omega_rad_s), tool_receptances(target_tool, omega_rad_s)
+    holder = decouple(reference_tip, ref_tool) - reference[1].compliance(omega_rad_s)
+    measured = np.log(np.stack([measured_target_tip[:, 0, 0], measured_target_tip[:, 1, 1]]))
+
+    def make(x) -> Connection:
+        return Connection(*np.exp(x))
+
+    def residual(x):
+        tip = couple(target["11"], target["12"], target["21"], target["22"], holder, make(x).compliance(omega_rad_s))
+        diff = np.log(np.stack([tip[:, 0, 0], tip[:, 2, 2]])) - measured
+        diff.imag = (diff.imag + np.pi) % (2 * np.pi) - np.pi
+        return np.concatenate([diff.real.ravel(), diff.imag.ravel()])
+
+    start = [initial.translational_n_per_m, initial.rotational_nm_per_rad, max(initial.translational_damping_ns_per_m, 1e-3), max(initial.rotational_damping_nms_per_rad, 1e-6)]
+    result = least_squares(residual, np.log(start), method="trf", x_scale=1.0)
+    return make(result.x)
