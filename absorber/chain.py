@@ -1,11 +1,14 @@
 """The per-pose chain, the one computation every caller runs for a pose (the `schedule` and
 `chatter`-style commands, the sweep, the Zenoh service, the gap workflow's depth rows):
 
-    modes -> critical depth and dominant chatter (semi-discretization, batched over poses)
+    modes -> critical depth and dominant chatter (the converged engine, batched over poses)
           -> absorber target by policy -> field (clamped, flagged) -> coil current
           -> critical depth with the absorber coupled to the tool tip
           -> absolute limits (zeroth order), the field interval covering the target's +-2 std
           -> the active-damping controller entry (DVF gain, virtual absorber; seed 000)
+          -> with robust samples (`robust_entries`): the depths the pose's modal uncertainty
+             guarantees (95 % lower bounds, seed 002 section 4), bare and with the absorber,
+             the robust absorber setting and DVF gain
 
 Policies:
 - `match` (seed 004): target = dominant chatter frequency.
