@@ -60,7 +60,7 @@ def test_certain_modes_guarantee_the_nominal_depth_and_spread_lowers_it(datasets
     the mean by about 1.96 std, and lies inside the samples' range."""
     cut, rpm, _ = read_cut(CUT)
     table = read_modal_table(datasets / "seeds/hou2023_positions.csv").select_poses([2, 4])
-    config = ScheduleConfig(cut, rpm, robust_samples=16, absolute_limits=False)
+    config = ScheduleConfig(cut, rpm, robust_samples=8, absolute_limits=False)
     certain = schedule_poses(table_pose_modes(table, distributions_from_table(table)), config)
     for s in certain:
         assert s.robust.depth_p95_m == pytest.approx(s.critical_depth_m, rel=2e-3)
@@ -68,11 +68,11 @@ def test_certain_modes_guarantee_the_nominal_depth_and_spread_lowers_it(datasets
     spread = replace(table, std={"std_k_n_per_m": 0.1 * table.k_n_per_m})
     uncertain = schedule_poses(table_pose_modes(spread, distributions_from_table(spread)), config)
     for s, c in zip(uncertain, certain):
-        samples = s.pose.distribution.sample_dynamics(16, 0)
+        samples = s.pose.distribution.sample_dynamics(8, 0)
         depths = np.array([r.depth_m for r in critical_points(samples, cut, rpm, verify=False)])
         mean, std = depths.mean(), depths.std(ddof=1)
         assert s.robust.depth_p95_m == pytest.approx(mean - norm.ppf(0.975) * std, rel=1e-6)  # batched with the other pose's samples
-        assert 0.03 < s.robust.depth_cv < 0.2
+        assert 0.03 < s.robust.depth_cv < 0.3
         assert s.robust.depth_p95_m < 0.95 * c.critical_depth_m
     assert lower95(np.array([np.inf, np.inf])) == (np.inf, 0.0)
     assert np.isnan(lower95(np.array([np.nan, np.nan, 1.0]))[0])
@@ -122,7 +122,8 @@ def test_schedule_sweep_and_service_engine_give_the_same_robust_entries(robust_s
 
     folder, entries = robust_schedule
     out = folder / "sweep"
-    done = posedyn("sweep", model_dir, "--grid", folder / "poses.csv", "--cut", CUT, "--out", out, "--workers", "1", "--no-lobes", "--robust-samples", "16", "--json")
+    (folder / "two.csv").write_text("\n".join(POSES.splitlines()[:3]) + "\n")  # the two poses compared below
+    done = posedyn("sweep", model_dir, "--grid", folder / "two.csv", "--cut", CUT, "--out", out, "--workers", "1", "--no-lobes", "--robust-samples", "16", "--json")
     assert done.returncode == 0, done.stderr
 
     with open(out / "results.csv", newline="") as f:
