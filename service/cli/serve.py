@@ -142,6 +142,13 @@ def query(
             f"absorber {_g(a['field_mt'])} mT, {_g(a['current_a'])} A{'' if a['feasible'] else ' (outside its range)'}, "
             f"critical depth with it {_g(e['critical_depth_with_absorber_mm'])} mm; DVF gain {_g(e['controller']['dvf_gain_ns_per_m'])} N s/m"
         )
+        r = e.get("robust")
+        if r:
+            ra = r["absorber"]
+            console.print(
+                f"  guaranteed (95 %, {r['samples']} samples): {_g(r['critical_depth_p95_mm'])} mm bare, {_g(r['critical_depth_with_absorber_p95_mm'])} mm with the "
+                f"{r['tuning']} setting ({_g(ra['field_mt'])} mT, {_g(ra['current_a'])} A; nominal setting {_g(r['nominal_tuning_with_absorber_p95_mm'])} mm)"
+            )
 
 
 def _g(value) -> str:
