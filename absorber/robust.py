@@ -222,7 +222,7 @@ def monte_carlo_limits(uncertainty: HostUncertainty, tuning: Tuning | None, cut:
         results = critical_points(one * len(rpm), cut, rpm, frequencies=False)
         converged = np.array([r.depth_m for r in results])
         failed = np.flatnonzero([not r.converged for r in results])
-        if len(failed):  # the engine could not answer there (seen at a flip-lobe peak): the finest semi-discretization is the reference
+        if len(failed):  # the engine could not answer there (a safeguard; seen at a flip-lobe peak before its repair was fixed): the finest semi-discretization is the reference
             converged[failed] = [r.depth_m for r in critical_points(one * len(failed), cut, rpm[failed], SDM_STEPS[-1], frequencies=False)]
         deviation = nominal_m / converged - 1.0
         todo = np.flatnonzero(~(np.abs(deviation) <= METHOD_TOLERANCE)) if method == "auto" else np.arange(len(rpm))
