@@ -29,6 +29,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import least_squares
 
 from posedyn.errors import InputError, check_non_negative, check_positive
 from posedyn.tool import Tool, tool_receptances
@@ -178,8 +179,6 @@ def identify_connection(reference_tip: np.ndarray, measured_target_tip: np.ndarr
     squares on the complex logarithm's real and imaginary parts (log |H| and phase, equal weight
     over the band), the parameters in logs, from `initial`. `reference_tip` is the reference
     assembly's full (f, 4, 4) tip receptance at that posture."""
-    from scipy.optimize import least_squares  # noqa: PLC0415 - only the identification needs it
-
     ref_tool, target = tool_receptances(reference[0], omega_rad_s), tool_receptances(target_tool, omega_rad_s)
     holder = decouple(reference_tip, ref_tool) - reference[1].compliance(omega_rad_s)
     measured = np.log(np.stack([measured_target_tip[:, 0, 0], measured_target_tip[:, 1, 1]]))
