@@ -90,3 +90,32 @@ def test_a_shifted_horizon_re_plans_from_the_previous_solution(transitions):
     cold = FieldPlanner(len(TIME) - 1, ABSORBER, COIL, DRIVE).solve(TIME + 0.5, shifted_target, initial_state=start)
     assert warm.solver["status"] == "solved" and warm.solver["iterations"] <= 3 < cold.solver["iterations"]
     assert np.allclose(warm.current_a, cold.current_a, rtol=1e-4, atol=1e-6)
+
+
+def test_plan_cli_on_a_path_across_seed_004s_positions(tmp_path, model_dir, datasets):
+    """`posedyn plan`: the chain's targets at a timed path's points (seed 004's positions 3, 5
+    and 7, 1.5 s each, a point every 0.1 s), the plan, its re-simulation and the step schedule in
+    one JSON; the trajectory file has a row per point. A path whose time goes back is refused
+    naming the file, row and column."""
+    import json
+    import subprocess
+    import sys
+
+    lines = ["pose_id,x_mm,y_mm,z_mm,beta_deg,time_s"]
+    for k, t in enumerate(np.arange(0.0, 4.5 + 1e-9, 0.1)):
+        lines.append(f"p{k},{1600 if t < 1.5 else 1400 if t < 3.0 else 1200},0,800,0,{t:.2f}")
+    path = tmp_path / "path.csv"
+    path.write_text("\n".join(lines) + "\n")
+    done = subprocess.run([sys.executable, "-m", "service", "plan", str(model_dir), "--path", str(path), "--cut", str(datasets / "seeds/hou2023_cut.toml"),
+                           "--out", str(tmp_path / "out"), "--json"], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(done.stdout)
+    assert summary["solver"]["status"] == "solved" and summary["points"] == 46
+    assert summary["plan"]["max_mistune_pct"] < 0.1 < summary["step_schedule"]["max_mistune_pct"]
+    assert summary["plan"]["max_voltage_v"] <= 48.0 < summary["step_schedule"]["asked_voltage_v"]
+    assert summary["resimulation_max_rel_error"] < 0.01
+    assert len((tmp_path / "out/trajectory.csv").read_text().splitlines()) == 47 and (tmp_path / "out/trajectory.png").stat().st_size > 0
+    path.write_text("\n".join(lines[:5] + [lines[5].rsplit(",", 1)[0] + ",0.05"] + lines[6:]) + "\n")
+    bad = subprocess.run([sys.executable, "-m", "service", "plan", str(model_dir), "--path", str(path), "--cut", str(datasets / "seeds/hou2023_cut.toml"),
+                          "--out", str(tmp_path / "out2")], capture_output=True, text=True)
+    assert bad.returncode == 2 and "path.csv" in bad.stderr and "row 5" in bad.stderr and "time_s" in bad.stderr

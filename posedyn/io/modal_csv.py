@@ -321,27 +321,59 @@ def read_pose_table(path: str | os.PathLike) -> PoseSet:
         data = path.read_bytes()
     except OSError as exc:
         raise InputError("a readable file", got=exc.strerror, file=str(path)) from None
-    text = _decode(data, str(path))
+    return parse_pose_table(_decode(data, str(path)), str(path))
+
+
+def read_tool_path(path: str | os.PathLike) -> tuple[PoseSet, np.ndarray]:
+    """A timed tool path: the pose columns plus `time_s` (s, strictly increasing), one row per
+    point; (poses, times)."""
+    path = Path(path)
+    try:
+        text = _decode(path.read_bytes(), str(path))
+    except OSError as exc:
+        raise InputError("a readable file", got=exc.strerror, file=str(path)) from None
+    rows = list(csv.reader(io.StringIO(text, newline="")))
+    header = [c.strip() for c in rows[0]] if rows else []
+    if "time_s" not in header:
+        raise InputError("a time_s column (s) beside the pose columns", got=header[:8], file=str(path), line=1, column="time_s")
+    j = header.index("time_s")
+    times = []
+    for r, cells in enumerate(rows[1:], 1):
+        if not any(c.strip() for c in cells):
+            continue
+        try:
+            value = float(cells[j])
+        except (ValueError, IndexError):
+            raise InputError("a number of seconds", got=cells[j] if j < len(cells) else "nothing", file=str(path), row=r, line=r + 1, column="time_s") from None
+        if not np.isfinite(value) or (times and value <= times[-1]):
+            raise InputError("finite times increasing from row to row", got=value, file=str(path), row=r, line=r + 1, column="time_s")
+        times.append(value)
+    rest = "\n".join(",".join(_quote(c) for k, c in enumerate(cells) if k != j) for cells in rows if any(c.strip() for c in cells)) + "\n"
+    return parse_pose_table(rest, str(path)), np.array(times)
+
+
+def parse_pose_table(text: str, source: str) -> PoseSet:
+    """`read_pose_table` on CSV text (`source` names it in errors)."""
     first = next(csv.reader(io.StringIO(text)), [])
     if "direction" in [c.strip() for c in first]:
-        return parse_modal_table(text, str(path)).poses
+        return parse_modal_table(text, source).poses
     pose_columns = ("pose_id",) + POSITION_COLUMNS + sum(ORIENTATION_COLUMNS.values(), ()) + JOINT_COLUMNS
     reader = csv.reader(io.StringIO(text, newline=""))
     header = [c.strip() for c in next(reader, [])]
     if not header:
-        raise InputError("a header row with the pose columns", got="an empty file", file=str(path))
+        raise InputError("a header row with the pose columns", got="an empty file", file=source)
     for name in header:
         if name not in pose_columns:
-            raise InputError("pose columns only (pose_id, x_mm, y_mm, z_mm, beta_deg or a/b/c_deg, q1..q6_deg)", got=name, file=str(path), line=1, column=name)
+            raise InputError("pose columns only (pose_id, x_mm, y_mm, z_mm, beta_deg or a/b/c_deg, q1..q6_deg)", got=name, file=source, line=1, column=name)
     # reuse the modal-table checks by giving every pose a placeholder mode row
     lines = [",".join(header + ["direction", "mode", "fn_hz", "zeta", "k_n_per_m"])]
     for cells in reader:
         if any(c.strip() for c in cells):
             lines.append(",".join(_quote(c) for c in cells) + ",x,1,1,0.5,1")
     try:
-        return parse_modal_table("\n".join(lines) + "\n", str(path)).poses
+        return parse_modal_table("\n".join(lines) + "\n", source).poses
     except InputError as exc:
-        raise (exc if exc.column != "mode" else InputError("one row per pose_id", got=exc.got, file=str(path), row=exc.row, line=exc.line, column="pose_id")) from None
+        raise (exc if exc.column != "mode" else InputError("one row per pose_id", got=exc.got, file=source, row=exc.row, line=exc.line, column="pose_id")) from None
 
 
 def _quote(cell: str) -> str:

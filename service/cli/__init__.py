@@ -17,7 +17,7 @@ from absorber.files import load_tuning_cache, save_tuning_cache
 from absorber.tuning import known_tunings
 from posedyn import __version__
 from posedyn.errors import InputError
-from service.cli import absorber, control, data, fit, gap, posemodel, serve, sle, stability, sweep, tool, twin
+from service.cli import absorber, control, data, fit, gap, plan, posemodel, serve, sle, stability, sweep, tool, twin
 
 app = typer.Typer(
     help="Pose-dependent tool-tip dynamics, chatter prediction and absorber/controller schedules for robotic milling.",
@@ -42,6 +42,7 @@ app.command("query")(serve.query)
 app.command("gap")(gap.gap)
 app.command("gap-campaign")(gap.gap_campaign)
 app.command("tool-change")(tool.tool_change)
+app.command("plan")(plan.plan)
 
 
 def _version(value: bool):

@@ -16,6 +16,7 @@ from posedyn.errors import InputError
 from posedyn.io import read_modal_table, read_pose_table
 from posedyn.io.json_values import json_ready
 from posedyn.io.model_dir import load_model
+from posedyn.table import PoseSet
 from posedyn.uncertainty import distributions_from_table
 
 console = Console(width=None if sys.stdout.isatty() else 140)
@@ -40,12 +41,12 @@ def modal_table_for(model_dir: Optional[Path], modes: Optional[Path], poses: Pat
     return modal_input_for(model_dir, modes, poses, distributions=False)[0]
 
 
-def modal_input_for(model_dir: Optional[Path], modes: Optional[Path], poses: Path, distributions: bool):
-    """(modal table, the poses' distributions or None): with `distributions`, a model's
-    predictive ones (correlated), else those of the table's std columns."""
+def modal_input_for(model_dir: Optional[Path], modes: Optional[Path], poses, distributions: bool):
+    """(modal table, the poses' distributions or None) at `poses` (a pose CSV or a PoseSet): with
+    `distributions`, a model's predictive ones (correlated), else those of the table's std columns."""
     if (model_dir is None) == (modes is None):
         raise InputError("either MODEL_DIR or --modes MODAL.csv", column="--modes")
-    pose_set = read_pose_table(poses)
+    pose_set = poses if isinstance(poses, PoseSet) else read_pose_table(poses)
     if modes is not None:
         table = read_modal_table(modes)
         missing = [p for p in pose_set.pose_id if p not in table.poses.pose_id]

@@ -1,0 +1,92 @@
+"""`posedyn plan`: the coil's voltage and current along a timed tool path (absorber.field_plan)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import typer
+
+from absorber.chain import ScheduleConfig, schedule_poses, table_pose_modes
+from absorber.coil_dynamics import CoilDrive
+from absorber.field_plan import FieldPlanner, simulate, step_schedule
+from absorber.files import read_absorber
+from posedyn.io.atomic import write_text_atomic
+from posedyn.io.cut import read_cut
+from posedyn.io.modal_csv import read_tool_path
+from posedyn.errors import InputError
+from service.cli.absorber import Policy
+from service.cli.common import console, modal_table_for, print_json, resolve_cut
+
+COLUMNS = ("time_s", "pose_id", "target_hz", "voltage_v", "current_a", "field_mt", "fluid_field_mt", "temperature_c", "frequency_hz", "step_frequency_hz", "step_current_a")
+
+
+def plan(
+    model_dir: Optional[Path] = typer.Argument(None, help="Model directory (or give --modes)."),
+    modes: Optional[Path] = typer.Option(None, "--modes", help="Modal table with the path's poses instead of a model."),
+    path: Path = typer.Option(..., "--path", help="Timed tool path: the pose columns and time_s (s, increasing), one row per point."),
+    cut: Optional[Path] = typer.Option(None, "--cut", help="Cut file (default: MODEL_DIR/cut.toml)."),
+    absorber: Optional[Path] = typer.Option(None, "--absorber", help="Absorber file (default: seed 004's design)."),
+    policy: Policy = typer.Option(Policy.match, "--policy"),
+    out: Path = typer.Option(..., "--out", help="Folder: trajectory.csv and trajectory.png."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Plan the coil's voltage along a tool path so the absorber stays on each point's target (CasADi, IPOPT)."""
+    poses, time_s = read_tool_path(path)
+    if len(time_s) < 2:
+        raise InputError("a path of at least two points", got=len(time_s), file=str(path), column="time_s")
+    the_cut, rpm, steps = read_cut(resolve_cut(cut, model_dir))
+    config = ScheduleConfig(the_cut, rpm, read_absorber(absorber), policy=policy.value, steps=steps, absolute_limits=False)
+    entries = schedule_poses(table_pose_modes(modal_table_for(model_dir, modes, poses)), config)
+    target = np.array([e.absorber.target_hz for e in entries])
+    coil, drive = config.coil, CoilDrive()
+    result = FieldPlanner(len(time_s) - 1, config.absorber, coil, drive).solve(time_s, target)
+    check = simulate(coil, drive, config.absorber, time_s, result.voltage_v)
+    baseline = step_schedule(coil, drive, config.absorber, time_s, target)
+    lo, hi = config.absorber.range_hz
+    reachable = np.clip(target, lo, hi)
+    summary = {
+        "points": len(time_s),
+        "solver": result.solver,
+        "plan": {"max_mistune_pct": float(100 * np.max(np.abs(result.frequency_hz[1:] / reachable[1:] - 1))),
+                 "max_voltage_v": float(np.max(np.abs(result.voltage_v))), "max_temperature_c": float(result.temperature_c.max())},
+        "step_schedule": {"max_mistune_pct": float(100 * np.max(np.abs(baseline[4][1:] / reachable[1:] - 1))), "asked_voltage_v": float(baseline[5])},
+        "resimulation_max_rel_error": float(np.max(np.abs(check[3] - result.current_a)) / max(np.max(np.abs(check[3])), 1e-12)),
+        "outside_absorber_range": int(np.sum((target < lo) | (target > hi))),
+        "trajectory": str(out / "trajectory.csv"),
+    }
+    out.mkdir(parents=True, exist_ok=True)
+    rows = zip(time_s, poses.pose_id, target, np.r_[result.voltage_v, np.nan], result.current_a, 1e3 * result.field_t, 1e3 * result.fluid_field_t,
+               result.temperature_c, result.frequency_hz, baseline[4], baseline[3])
+    lines = [",".join(COLUMNS)] + [",".join(c if isinstance(c, str) else ("" if not np.isfinite(c) else repr(float(c))) for c in row) for row in rows]
+    write_text_atomic(out / "trajectory.csv", "\n".join(lines) + "\n")
+    _plot(out / "trajectory.png", time_s, target, result, baseline)
+    if as_json:
+        print_json(summary)
+        return
+    console.print(json.dumps(summary, indent=2))
+
+
+def _plot(path: Path, time_s, target, result, baseline) -> None:
+    import matplotlib  # heavy (about 0.3 s): only when a figure is drawn
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # heavy (about 0.3 s): only when a figure is drawn
+
+    fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
+    axes[0].step(time_s, target, where="post", color="k", lw=0.8, label="target")
+    axes[0].plot(time_s, result.frequency_hz, label="planned")
+    axes[0].plot(time_s, baseline[4], "--", label="step schedule")
+    axes[0].set_ylabel("absorber Hz")
+    axes[0].legend()
+    axes[1].step(time_s[:-1], result.voltage_v, where="post", label="voltage V")
+    axes[1].plot(time_s, result.current_a * 10, label="current A x 10")
+    axes[1].legend()
+    axes[2].plot(time_s, result.temperature_c)
+    axes[2].set_ylabel("temperature C")
+    axes[2].set_xlabel("time s")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
