@@ -15,6 +15,9 @@ Policies:
 - `sims`: the target (within the absorber's range) that maximises the zeroth-order absolute
   stability limit of host plus absorber, the absorber's mass and field-dependent damping
   included (seed 002's max-min Re G for the real, coupled structure).
+- `depth`: the target that maximises the critical depth of host plus absorber at the cut's speed
+  (the converged engine; a grid of DEPTH_GRID targets around the chatter frequency, then a
+  bounded refinement): neither `match` nor `sims` is that optimum for the engine in general.
 
 Stability is `posedyn.stability.critical_points`, batched over the poses: the converged engine
 by default (every result carries the accuracy it reached), the semi-discretization when the
@@ -42,7 +45,7 @@ from posedyn.stability.critical import REL_TOL
 from posedyn.table import ModalTable
 from posedyn.uncertainty import ModalDistribution, distributions_from_table
 
-POLICIES = ("match", "sims")
+POLICIES = ("match", "sims", "depth")
 
 
 @dataclass(frozen=True)
@@ -224,8 +227,56 @@ def sims_target_hz(dyn: ToolTipDynamics, config: ScheduleConfig, around_hz: floa
 def absorber_setting(dyn: ToolTipDynamics, config: ScheduleConfig, chatter_hz: float) -> tuple[float, FieldSetting, float, bool]:
     """(target Hz, FieldSetting, coil current A or NaN, feasible): the policy's target, the
     field that tunes the absorber to it (clamped to its range) and whether the coil can give it."""
-    target = chatter_hz if config.policy == "match" else sims_target_hz(dyn, config, chatter_hz)
+    if config.policy == "match":
+        target = chatter_hz
+    elif config.policy == "sims":
+        target = sims_target_hz(dyn, config, chatter_hz)
+    else:
+        target = depth_target_hz(dyn, config, chatter_hz)
     return (target, *coil_setting(target, config))
+
+
+#: The `depth` policy's first grid: targets from 0.7 to 1.3 times the chatter frequency.
+DEPTH_GRID = 13
+
+
+def coupled_depth_m(dyn: ToolTipDynamics, config: ScheduleConfig, targets_hz, fields_t=None) -> np.ndarray:
+    """Critical depth (m) at the config's cut and speed with the absorber at each frequency: by
+    default tuned there by its field (and the damping that field gives); with `fields_t`, at that
+    frequency with that field's damping (a trajectory's absorber, its temperature in the
+    frequency). The converged engine, or `steps`."""
+    a = config.absorber
+    targets = np.atleast_1d(np.asarray(targets_hz, dtype=float))
+    if fields_t is None:
+        structures = [coupled(dyn, config, a.field_for_frequency(float(f), clamp=True).field_t) for f in targets]
+    else:
+        structures = [with_absorber(dyn, a.mass_kg, a.mass_kg * (2 * math.pi * f) ** 2, a.damping_ratio(float(b)), config.directions) for f, b in zip(targets, fields_t)]
+    return np.array([r.depth_m for r in critical_points(structures, config.cut, config.rpm, config.steps, frequencies=False)])
+
+
+def depth_target_hz(dyn: ToolTipDynamics, config: ScheduleConfig, around_hz: float) -> float:
+    """The absorber frequency that maximises the critical depth (module docstring, `depth`)."""
+    lo, hi = config.absorber.range_hz
+    lo, hi = max(lo, 0.7 * around_hz), min(hi, 1.3 * around_hz)
+    if hi <= lo:
+        return float(np.clip(around_hz, *config.absorber.range_hz))
+    grid = np.linspace(lo, hi, DEPTH_GRID)
+    values = coupled_depth_m(dyn, config, grid)
+    values = np.where(np.isfinite(values), values, -np.inf)
+    i = int(np.argmax(values))
+    a_, b_ = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+    best = minimize_scalar(lambda f: -coupled_depth_m(dyn, config, [f])[0], bounds=(a_, b_), method="bounded", options={"xatol": 1e-3 * around_hz, "maxiter": 12})
+    return float(best.x) if -best.fun > values[i] else float(grid[i])
+
+
+def depth_weight(dyn: ToolTipDynamics, config: ScheduleConfig, target_hz: float, rel_step: float = 0.03) -> float:
+    """How much critical depth a mistuned absorber costs at a depth-optimal target: the relative
+    curvature -(a(f (1 + d)) + a(f (1 - d)) - 2 a(f)) / (d^2 a(f)), so that a relative mistuning
+    m loses about weight m^2 / 2 of the depth (0 where the depth does not fall either side)."""
+    a = coupled_depth_m(dyn, config, [target_hz * (1 - rel_step), target_hz, target_hz * (1 + rel_step)])
+    if not np.all(np.isfinite(a)) or a[1] <= 0:
+        return 0.0
+    return float(max(0.0, -(a[0] + a[2] - 2 * a[1]) / (rel_step**2 * a[1])))
 
 
 def coil_setting(target_hz: float, config: ScheduleConfig) -> tuple[FieldSetting, float, bool]:

@@ -93,10 +93,11 @@ def test_a_shifted_horizon_re_plans_from_the_previous_solution(transitions):
 
 
 def test_plan_cli_on_a_path_across_seed_004s_positions(tmp_path, model_dir, datasets):
-    """`posedyn plan`: the chain's targets at a timed path's points (seed 004's positions 3, 5
-    and 7, 1.5 s each, a point every 0.1 s), the plan, its re-simulation and the step schedule in
-    one JSON; the trajectory file has a row per point. A path whose time goes back is refused
-    naming the file, row and column."""
+    """`posedyn plan --policy depth`: the depth-optimal targets at a timed path's points (seed
+    004's positions 3, 5 and 7, 1.5 s each, a point every 0.1 s), weighted by how much depth
+    mistuning costs there, the plan, its re-simulation and the step schedule in one JSON: the
+    minimum critical depth along the path is higher with the plan. The trajectory file has a row
+    per point. A path whose time goes back is refused naming the file, row and column."""
     import json
     import subprocess
     import sys
@@ -107,13 +108,15 @@ def test_plan_cli_on_a_path_across_seed_004s_positions(tmp_path, model_dir, data
     path = tmp_path / "path.csv"
     path.write_text("\n".join(lines) + "\n")
     done = subprocess.run([sys.executable, "-m", "service", "plan", str(model_dir), "--path", str(path), "--cut", str(datasets / "seeds/hou2023_cut.toml"),
-                           "--out", str(tmp_path / "out"), "--json"], capture_output=True, text=True)
+                           "--policy", "depth", "--out", str(tmp_path / "out"), "--json"], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     summary = json.loads(done.stdout)
     assert summary["solver"]["status"] == "solved" and summary["points"] == 46
     assert summary["plan"]["max_mistune_pct"] < 0.1 < summary["step_schedule"]["max_mistune_pct"]
     assert summary["plan"]["max_voltage_v"] <= 48.0 < summary["step_schedule"]["asked_voltage_v"]
     assert summary["resimulation_max_rel_error"] < 0.01
+    depth = summary["min_critical_depth_mm"]  # the depth-optimal targets held: 1.45 mm, the step schedule 0.94 mm
+    assert depth["plan"] > 1.2 * depth["step_schedule"]
     assert len((tmp_path / "out/trajectory.csv").read_text().splitlines()) == 47 and (tmp_path / "out/trajectory.png").stat().st_size > 0
     path.write_text("\n".join(lines[:5] + [lines[5].rsplit(",", 1)[0] + ",0.05"] + lines[6:]) + "\n")
     bad = subprocess.run([sys.executable, "-m", "service", "plan", str(model_dir), "--path", str(path), "--cut", str(datasets / "seeds/hou2023_cut.toml"),

@@ -38,6 +38,7 @@ class Layout(str, Enum):
 class Policy(str, Enum):
     match = "match"
     sims = "sims"
+    depth = "depth"
 
 
 @app.command("tune")

@@ -9,7 +9,7 @@ from typing import Optional
 import numpy as np
 import typer
 
-from absorber.chain import ScheduleConfig, schedule_poses, table_pose_modes
+from absorber.chain import ScheduleConfig, coupled_depth_m, depth_weight, schedule_poses, table_pose_modes
 from absorber.coil_dynamics import CoilDrive
 from absorber.field_plan import FieldPlanner, simulate, step_schedule
 from absorber.files import read_absorber
@@ -39,20 +39,29 @@ def plan(
         raise InputError("a path of at least two points", got=len(time_s), file=str(path), column="time_s")
     the_cut, rpm, steps = read_cut(resolve_cut(cut, model_dir))
     config = ScheduleConfig(the_cut, rpm, read_absorber(absorber), policy=policy.value, steps=steps, absolute_limits=False)
-    entries = schedule_poses(table_pose_modes(modal_table_for(model_dir, modes, poses)), config)
-    target = np.array([e.absorber.target_hz for e in entries])
+    columns = np.column_stack(list(poses.numeric_columns().values()))
+    unique, back = np.unique(columns, axis=0, return_inverse=True)  # a path dwells: each distinct pose once
+    first = [int(np.flatnonzero(back.ravel() == u)[0]) for u in range(len(unique))]
+    entries = schedule_poses(table_pose_modes(modal_table_for(model_dir, modes, poses.subset(first))), config)
+    weights = [_weight(e, config) for e in entries]
+    back = back.ravel()
+    target = np.array([entries[u].absorber.target_hz for u in back])
+    weight = np.array([weights[u] for u in back])
     coil, drive = config.coil, CoilDrive()
-    result = FieldPlanner(len(time_s) - 1, config.absorber, coil, drive).solve(time_s, target)
+    result = FieldPlanner(len(time_s) - 1, config.absorber, coil, drive).solve(time_s, target, weight)
     check = simulate(coil, drive, config.absorber, time_s, result.voltage_v)
     baseline = step_schedule(coil, drive, config.absorber, time_s, target)
     lo, hi = config.absorber.range_hz
     reachable = np.clip(target, lo, hi)
+    planned_depth = _depths(entries, back, result.frequency_hz, result.fluid_field_t, config)
+    step_depth = _depths(entries, back, baseline[4], baseline[1], config)
     summary = {
         "points": len(time_s),
         "solver": result.solver,
         "plan": {"max_mistune_pct": float(100 * np.max(np.abs(result.frequency_hz[1:] / reachable[1:] - 1))),
                  "max_voltage_v": float(np.max(np.abs(result.voltage_v))), "max_temperature_c": float(result.temperature_c.max())},
         "step_schedule": {"max_mistune_pct": float(100 * np.max(np.abs(baseline[4][1:] / reachable[1:] - 1))), "asked_voltage_v": float(baseline[5])},
+        "min_critical_depth_mm": {"plan": float(1e3 * planned_depth[1:].min()), "step_schedule": float(1e3 * step_depth[1:].min())},
         "resimulation_max_rel_error": float(np.max(np.abs(check[3] - result.current_a)) / max(np.max(np.abs(check[3])), 1e-12)),
         "outside_absorber_range": int(np.sum((target < lo) | (target > hi))),
         "trajectory": str(out / "trajectory.csv"),
@@ -67,6 +76,30 @@ def plan(
         print_json(summary)
         return
     console.print(json.dumps(summary, indent=2))
+
+
+def _depths(entries, pose_of_point, frequency_hz, fluid_field_t, config: ScheduleConfig) -> np.ndarray:
+    """Critical depth (m) at every point with the absorber as a trajectory has it there; one
+    solve per distinct pose and frequency (to 0.01 Hz)."""
+    keys = [(int(p), round(float(f), 2)) for p, f in zip(pose_of_point, frequency_hz)]
+    found = {}
+    for key, f, b in zip(keys, frequency_hz, fluid_field_t):
+        found.setdefault(key, (f, b))
+    out = {key: coupled_depth_m(entries[key[0]].pose.dyn, config, [f], [b])[0] for key, (f, b) in found.items()}
+    return np.array([out[k] for k in keys])
+
+
+def _weight(entry, config: ScheduleConfig) -> float:
+    """The plan's weight of a pose: with the `depth` policy, how much depth mistuning costs there
+    (`absorber.chain.depth_weight`, normalised below) discounted where the target itself is
+    uncertain, 1 / (1 + (s_f / (zeta_a f))^2) with s_f the predicted std of the chatter mode's
+    frequency and zeta_a f the absorber's half bandwidth; other policies: 1."""
+    if config.policy != "depth":
+        return 1.0
+    a = entry.absorber
+    curvature = depth_weight(entry.pose.dyn, config, a.target_hz)
+    spread = entry.pose.lowest_xy[5] / (config.absorber.damping_ratio(a.field_t) * a.target_hz)
+    return 1e-3 + curvature / (1.0 + spread**2)
 
 
 def _plot(path: Path, time_s, target, result, baseline) -> None:

@@ -30,7 +30,7 @@ def sweep(
     workers: int = typer.Option(2, "--workers", min=1, help="Local Dask workers (processes)."),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Address of a running Dask scheduler instead of a local cluster (the input files must be readable by its workers)."),
     resume: bool = typer.Option(False, "--resume", help="Keep the chunks already in --out and compute only the missing ones."),
-    policy: str = typer.Option("match", "--policy", help="Absorber target: match (dominant chatter) or sims (max-min Re G; slow)."),
+    policy: str = typer.Option("match", "--policy", help="Absorber target: match (dominant chatter), sims (max-min Re G; slow) or depth (the largest critical depth; slow)."),
     steps: Optional[int] = typer.Option(None, "--steps", min=4, help="Expert override: semi-discretization steps per delay instead of the converged engine (error not estimated)."),
     chunk_size: int = typer.Option(250, "--chunk-size", min=1, help="Poses per chunk (the unit of work, of writing and of resuming)."),
     robust_samples: int = typer.Option(0, "--robust-samples", min=0, max=2000, help="> 0 (8 or more): the guaranteed depths (95 % lower bounds) over that many samples of each pose's modes, and the robust absorber setting; seconds per pose. Needs a model."),
