@@ -126,6 +126,25 @@ def test_a_plan_is_published_live_entry_by_entry_and_whole_to_late_subscribers(s
     assert client.stored_plan("job-7")["entries"] == plan["entries"]
 
 
+def test_a_timed_plan_carries_the_coils_trajectory(service, client):
+    """A plan with the poses' times (`times_s`) also carries the coil's planned voltage, current
+    and field through the entries' targets (absorber.field_plan, in a worker); after the first
+    node (the coil starts without field) the absorber is on each entry's target. Times that go
+    back are refused."""
+    poses = [dict(P5, pose_id="a"), {"pose_id": "b", "x_mm": 1600.0, "y_mm": 0.0, "z_mm": 800.0, "beta_deg": 0.0},
+             {"pose_id": "c", "x_mm": 1200.0, "y_mm": 0.0, "z_mm": 800.0, "beta_deg": 0.0}]
+    plan = client.plan("timed-1", poses, timeout_s=60, times_s=[0.0, 1.0, 2.0])
+    trajectory = plan["trajectory"]
+    assert plan["times_s"] == [0.0, 1.0, 2.0] and trajectory["solver"]["status"] == "solved"
+    assert len(trajectory["current_a"]) == 3 and len(trajectory["voltage_v"]) == 2
+    for f, e in zip(trajectory["frequency_hz"][1:], plan["entries"][1:]):
+        assert f == pytest.approx(e["absorber"]["target_hz"], rel=1e-3)
+    assert client.stored_plan("timed-1")["trajectory"] == trajectory
+    with pytest.raises(ServiceError) as bad:
+        client.plan("timed-2", poses, timeout_s=10, times_s=[0.0, 2.0, 1.0])
+    assert bad.value.code == "invalid_field" and "times_s" in bad.value.message
+
+
 def test_a_killed_service_restarts_with_its_plans(model_dir, tmp_path):
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     state = tmp_path / "state"

@@ -14,6 +14,7 @@ import typer
 
 from posedyn.errors import InputError
 from posedyn.io import read_pose_table
+from posedyn.io.modal_csv import read_tool_path
 from service.cli.common import console, resolve_cut
 from service.zenoh_service.client import ScheduleClient, ServiceError
 from service.zenoh_service.protocol import RequestError
@@ -121,8 +122,13 @@ def query(
         if pose_json is not None:
             result = client.schedule(_json_option(pose_json, "--pose-json"), cut)
         else:
-            rows = read_pose_table(plan).records()
-            result = client.plan(plan_id or plan.stem, rows, cut, timeout_s=max(timeout_s, 2.0 * len(rows)))
+            times = None
+            if "time_s" in plan.read_text(encoding="utf-8", errors="replace").splitlines()[0].split(","):
+                path_poses, times = read_tool_path(plan)  # a timed path: the plan carries the coil's trajectory
+                rows, times = path_poses.records(), times.tolist()
+            else:
+                rows = read_pose_table(plan).records()
+            result = client.plan(plan_id or plan.stem, rows, cut, timeout_s=max(timeout_s, 2.0 * len(rows)), times_s=times)
     except ServiceError as exc:
         print(f"error: {exc.code}: {exc.message}", file=sys.stderr)
         raise typer.Exit(3)

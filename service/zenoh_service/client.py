@@ -63,12 +63,15 @@ class ScheduleClient:
         request = {"pose": pose} if cut is None else {"pose": pose, "cut": cut}
         return self.get(keys.SCHEDULE, request, timeout_s)
 
-    def plan(self, plan_id: str, poses: list[dict], cut: dict | None = None, timeout_s: float | None = None, wait: bool = True) -> dict:
-        """The computed plan; with `wait`, a plan the service accepted for the background is
-        polled until it is done or the timeout has passed (then its progress is returned,
-        `{"state": "pending", "done", "total", ...}`)."""
+    def plan(self, plan_id: str, poses: list[dict], cut: dict | None = None, timeout_s: float | None = None, wait: bool = True,
+             times_s: list[float] | None = None) -> dict:
+        """The computed plan (with `times_s`, the poses' times, also the coil's trajectory); with
+        `wait`, a plan the service accepted for the background is polled until it is done or the
+        timeout has passed (then its progress is returned, `{"state": "pending", "done", "total", ...}`)."""
         deadline = time.monotonic() + (timeout_s or self.timeout_s)
         request = {"poses": poses} if cut is None else {"poses": poses, "cut": cut}
+        if times_s is not None:
+            request["times_s"] = list(times_s)
         doc = self.get(keys.plan(plan_id), request, timeout_s)
         while wait and doc.get("state") in ("accepted", "pending"):
             left = deadline - time.monotonic()

@@ -11,6 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from absorber.chain import ScheduleConfig, schedule_entries
+from absorber.coil import Coil
+from absorber.coil_dynamics import CoilDrive
+from absorber.field_plan import FieldPlanner
 from absorber.files import read_absorber, read_actuator
 from posedyn.errors import InputError
 from posedyn.io.cut import read_cut
@@ -71,6 +74,14 @@ class ScheduleEngine:
         if self.tools is not None:
             table = tool_changed_table(table, *self.tools)
         return schedule_entries(table, config, distributions)[0]
+
+    def trajectory(self, targets_hz: list[float], times_s: list[float]) -> dict:
+        """The coil's voltage, current and field through the targets at the times
+        (`absorber.field_plan`; the service's absorber, the default coil and drive)."""
+        coil, drive = Coil(), CoilDrive()
+        plan = FieldPlanner(len(times_s) - 1, self.absorber, coil, drive).solve(times_s, targets_hz)
+        return {"voltage_v": plan.voltage_v.tolist(), "current_a": plan.current_a.tolist(), "field_mt": (1e3 * plan.field_t).tolist(),
+                "temperature_c": plan.temperature_c.tolist(), "frequency_hz": plan.frequency_hz.tolist(), "solver": plan.solver}
 
     def config(self, cut: dict) -> ScheduleConfig:
         """The schedule settings with a request's cut overrides."""

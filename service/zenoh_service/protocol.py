@@ -162,18 +162,33 @@ def parse_schedule_request(payload: bytes | None, max_bytes: int) -> tuple[dict,
     return parse_pose(obj["pose"]), parse_cut(obj.get("cut"))
 
 
-def parse_plan_request(payload: bytes | None, max_bytes: int, max_poses: int) -> tuple[list[dict], dict] | None:
-    """(poses, cut overrides); None when there is no payload (a query for a stored plan)."""
+def parse_plan_request(payload: bytes | None, max_bytes: int, max_poses: int) -> tuple[list[dict], dict, list[float] | None] | None:
+    """(poses, cut overrides, the poses' times or None); None when there is no payload (a query
+    for a stored plan). With `times_s` (s, one per pose, increasing) the plan also carries the
+    coil's voltage and current trajectory (`absorber.field_plan`)."""
     doc = parse_json(payload, max_bytes, required=False)
     if doc is None:
         return None
-    obj = _object(doc, "request", ("poses", "cut"))
+    obj = _object(doc, "request", ("poses", "cut", "times_s"))
     poses = obj.get("poses")
     if not isinstance(poses, list) or not poses:
         raise RequestError("missing_field" if poses is None else "invalid_field", "request.poses: expected a non-empty list of pose objects")
     if len(poses) > max_poses:
         raise RequestError("payload_too_large", f"request.poses: expected at most {max_poses} poses, got {len(poses)}")
-    return [parse_pose(p, f"poses[{i}]") for i, p in enumerate(poses)], parse_cut(obj.get("cut"))
+    parsed = [parse_pose(p, f"poses[{i}]") for i, p in enumerate(poses)]
+    return parsed, parse_cut(obj.get("cut")), parse_times(obj.get("times_s"), len(parsed))
+
+
+def parse_times(value, count: int, where: str = "request.times_s") -> list[float] | None:
+    """None, or `count` finite times in seconds, strictly increasing (at least two)."""
+    if value is None:
+        return None
+    if not isinstance(value, list) or len(value) != count or count < 2:
+        raise RequestError("invalid_field", f"{where}: expected a list of {count} times, one per pose (at least two poses)")
+    times = [_number({"t": v}, "t", f"{where}[{i}]") for i, v in enumerate(value)]
+    if any(b <= a for a, b in zip(times, times[1:])):
+        raise RequestError("invalid_field", f"{where}: expected increasing times")
+    return times
 
 
 def valid_plan_id(plan_id: str) -> str:

@@ -175,8 +175,8 @@ class Job:
 class PlanJob:
     """A plan being computed pose by pose (the poses already cached are skipped)."""
 
-    def __init__(self, plan_id: str, poses: list[dict], cut: dict):
-        self.plan_id, self.poses, self.cut = plan_id, poses, cut
+    def __init__(self, plan_id: str, poses: list[dict], cut: dict, times: list[float] | None = None):
+        self.plan_id, self.poses, self.cut, self.times = plan_id, poses, cut, times
         self.keys = [canonical(p, cut) for p in poses]
         self.checked = False  # poses checked (workspace, reachability, cut) in a worker
         self.next = 0  # the next pose to look at
@@ -351,14 +351,14 @@ class ScheduleService:
         if request is None:
             self._reply(query, request_bytes, json.dumps(self.stored_plan(plan_id)).encode())
             return False
-        poses, cut = request
+        poses, cut, times = request
         budget_s = parse_timeout(query.parameters.get("timeout_ms"))
         now = time.monotonic()
         with self._cond:
             same = self._pending.get(plan_id)
-            if same is not None and (same.poses != poses or same.cut != cut):
+            if same is not None and (same.poses != poses or same.cut != cut or same.times != times):
                 raise self._busy(f"plan {plan_id!r} is being computed with other poses", self._expected_wait(0, self._uncached(same)))
-        plan = same or self._accept_plan(plan_id, poses, cut)  # the same plan asked again: wait for it
+        plan = same or self._accept_plan(plan_id, poses, cut, times)  # the same plan asked again: wait for it
         waiter = Waiter(self, query, request_bytes, self._deadline(now, budget_s), lambda: json.dumps(self._plan_progress(plan, "accepted")).encode())
         with self._cond:
             finished = plan.finishing
@@ -382,7 +382,7 @@ class ScheduleService:
             request = parse_plan_request(sample.payload.to_bytes(), self.settings.max_plan_payload_bytes, self.settings.max_plan_poses)
             if request is None:
                 raise RequestError("missing_payload", "a plan put needs its poses")
-            self._accept_plan(plan_id, request[0], request[1])
+            self._accept_plan(plan_id, *request)
         except RequestError as exc:
             self._count("errors")
             log.warning("plan put on %s refused: %s: %s", sample.key_expr, exc.code, exc.message)
@@ -415,7 +415,7 @@ class ScheduleService:
 
     # --- plans -----------------------------------------------------------------------------------
 
-    def _accept_plan(self, plan_id: str, poses: list[dict], cut: dict) -> PlanJob:
+    def _accept_plan(self, plan_id: str, poses: list[dict], cut: dict, times: list[float] | None = None) -> PlanJob:
         with self._cond:
             if self._closing:
                 raise RequestError("shutting_down", "the service is stopping")
@@ -424,7 +424,7 @@ class ScheduleService:
             if len(self._pending) >= self.settings.pending_plans:
                 ahead = min(self._uncached(p) for p in self._pending.values())  # a slot frees when the first is done
                 raise self._busy(f"{len(self._pending)} plans are being computed (the limit)", self._expected_wait(len(self._lane), ahead))
-            plan = PlanJob(plan_id, poses, cut)
+            plan = PlanJob(plan_id, poses, cut, times)
             self._pending[plan_id] = plan
             self._plan_lane.append(plan)
             self._cond.notify()
@@ -462,7 +462,7 @@ class ScheduleService:
 
     def _recompute_stale(self, plan: dict) -> None:
         try:
-            self._accept_plan(plan["plan_id"], plan["poses"], plan["cut"])
+            self._accept_plan(plan["plan_id"], plan["poses"], plan["cut"], plan.get("times_s"))
             log.warning("stored plan %s was computed with model %s: recomputing it with %s", plan["plan_id"], plan["model_version"][:12], self.model_version[:12])
         except RequestError as exc:
             log.warning("stored plan %s of model %s is not republished (%s); it is recomputed when its poses are sent again", plan["plan_id"], plan["model_version"][:12], exc.message)
@@ -476,6 +476,9 @@ class ScheduleService:
                     raise RequestError("busy", "part of the plan left the cache before the plan was complete; send it again (or raise cache_entries)")
                 plan.doc = {"schema_version": SCHEMA_VERSION, "plan_id": plan.plan_id, "model_version": self.model_version, "service_id": self.service_id,
                             "published_at": _now(), "cut": plan.cut, "poses": plan.poses, "entries": entries}
+                if plan.times is not None:  # the coil's trajectory through the poses, planned in a worker
+                    plan.doc["times_s"] = plan.times
+                    plan.doc["trajectory"] = self.pool.call(workers.trajectory, [e["absorber"]["target_hz"] for e in entries], plan.times)
                 if self.store is not None:
                     self.store.write(plan.doc)
                 self._publish(plan.doc)

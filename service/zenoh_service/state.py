@@ -18,7 +18,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from posedyn.io.atomic import sync_folder, write_text_atomic
-from service.zenoh_service.protocol import RequestError, parse_cut, parse_pose, valid_plan_id
+from service.zenoh_service.protocol import RequestError, parse_cut, parse_pose, parse_times, valid_plan_id
 
 log = logging.getLogger("posedyn.service")
 
@@ -54,6 +54,14 @@ def plan_problem(doc, plan_id: str) -> str | None:
     for i, (entry, pose) in enumerate(zip(entries, poses)):
         if not isinstance(entry, dict) or entry.get("pose_id") != pose["pose_id"] or "critical_depth_mm" not in entry:
             return f"entries[{i}]: expected the schedule entry of pose {pose['pose_id']!r}"
+    if "times_s" in doc or "trajectory" in doc:
+        try:
+            parse_times(doc.get("times_s"), len(poses), "times_s")
+        except RequestError as exc:
+            return exc.message
+        trajectory = doc.get("trajectory")
+        if not isinstance(trajectory, dict) or not isinstance(trajectory.get("current_a"), list) or len(trajectory["current_a"]) != len(poses):
+            return f"trajectory: expected the coil's trajectory at the {len(poses)} times"
     return None
 
 

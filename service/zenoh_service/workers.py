@@ -70,6 +70,11 @@ def entry(pose: dict, cut: dict) -> dict:
     return out
 
 
+def trajectory(targets_hz: list[float], times_s: list[float]) -> dict:
+    """The coil's planned trajectory through a plan's targets (in a worker process)."""
+    return json_ready(_engine.trajectory(targets_hz, times_s))
+
+
 def check_poses(poses: list[dict], cut: dict) -> None:
     """Workspace, reachability and cut overrides of a plan's poses, before any of them is computed."""
     for i, pose in enumerate(poses):
