@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 from pathlib import Path
 from typing import Optional
@@ -69,8 +71,11 @@ def plan(
     out.mkdir(parents=True, exist_ok=True)
     rows = zip(time_s, poses.pose_id, target, np.r_[result.voltage_v, np.nan], result.current_a, 1e3 * result.field_t, 1e3 * result.fluid_field_t,
                result.temperature_c, result.frequency_hz, baseline[4], baseline[3])
-    lines = [",".join(COLUMNS)] + [",".join(c if isinstance(c, str) else ("" if not np.isfinite(c) else repr(float(c))) for c in row) for row in rows]
-    write_text_atomic(out / "trajectory.csv", "\n".join(lines) + "\n")
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(COLUMNS)
+    writer.writerows([c if isinstance(c, str) else ("" if not np.isfinite(c) else repr(float(c))) for c in row] for row in rows)
+    write_text_atomic(out / "trajectory.csv", buffer.getvalue())
     _plot(out / "trajectory.png", time_s, target, result, baseline)
     if as_json:
         print_json(summary)
