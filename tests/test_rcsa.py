@@ -331,13 +331,19 @@ def test_seed003_target_tool_at_the_representative_posture(datasets):
 
 
 def test_schedule_and_the_service_take_a_tool_file(tmp_path, datasets, model_dir):
-    """One tool change for every caller: `posedyn schedule --target-tool` gives the entry of
-    `posedyn schedule --modes` on `posedyn tool-change`'s table, and the service's engine with
-    the same tools the same numbers; its model_version names the tools."""
+    """One tool change for every caller: `posedyn schedule --target-tool` gives the entry of the
+    chain on the table `posedyn tool-change` writes (read back from its CSV), and the service's
+    engine with the same tools the same numbers; its model_version names the tools."""
     import json
     import subprocess
     import sys
 
+    from absorber.chain import ScheduleConfig, schedule_entries
+    from posedyn.io import read_modal_table, read_pose_table, write_modal_table
+    from posedyn.io.cut import read_cut
+    from posedyn.io.model_dir import load_model
+    from posedyn.io.tool_file import read_tool
+    from posedyn.tool_change import tool_changed_table
     from service.zenoh_service.engine import ScheduleEngine
 
     poses = tmp_path / "poses.csv"
@@ -351,8 +357,11 @@ def test_schedule_and_the_service_take_a_tool_file(tmp_path, datasets, model_dir
         return done.stdout
 
     direct = json.loads(posedyn("schedule", model_dir, "--poses", poses, "--cut", cut, "--reference-tool", ref, "--target-tool", tgt, "--json"))[0]
-    posedyn("tool-change", model_dir, "--reference-tool", ref, "--target-tool", tgt, "--poses", poses, "--out", tmp_path / "target.csv")
-    via_table = json.loads(posedyn("schedule", "--modes", tmp_path / "target.csv", "--poses", poses, "--cut", cut, "--json"))[0]
+    # what `posedyn tool-change` writes, read back as `schedule --modes` reads it (in this process)
+    changed = tool_changed_table(load_model(model_dir).predict_table(read_pose_table(poses)), read_tool(ref), read_tool(tgt), 0.15)
+    write_modal_table(changed, tmp_path / "target.csv")
+    the_cut, rpm, _ = read_cut(cut)
+    via_table = schedule_entries(read_modal_table(tmp_path / "target.csv"), ScheduleConfig(the_cut, rpm))[0]
     assert direct["critical_depth_mm"] == pytest.approx(via_table["critical_depth_mm"], rel=1e-9)
     assert direct["absorber"]["field_mt"] == pytest.approx(via_table["absorber"]["field_mt"], rel=1e-9)
     engine = ScheduleEngine(model_dir, cut, tools=(ref, tgt))
