@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
 from scipy.optimize import brentq
 
 from posedyn.errors import InputError, check_positive
@@ -44,8 +45,18 @@ class Coil:
         for name in ("turns", "gap_m", "mrf_relative_permeability", "steel_path_m", "gap_to_steel_area", "steel_initial_relative_permeability", "steel_saturation_t", "max_current_a"):
             check_positive(name, getattr(self, name))
 
-    def _steel_h(self, b_steel: float) -> float:
-        return b_steel / (MU0 * self.steel_initial_relative_permeability * (1.0 - abs(b_steel) / self.steel_saturation_t))
+    def current(self, field_t, xp=np):
+        """I(B) = (H_gap g + H_steel l) / N for B >= 0 below saturation, unchecked; `xp` numpy or
+        casadi (the coil's dynamics and planner use the same expression)."""
+        b_steel = field_t * self.gap_to_steel_area
+        h_steel = b_steel / (MU0 * self.steel_initial_relative_permeability * (1.0 - b_steel / self.steel_saturation_t))
+        return (field_t / (MU0 * self.mrf_relative_permeability) * self.gap_m + h_steel * self.steel_path_m) / self.turns
+
+    def current_slope(self, field_t, xp=np):
+        """dI/dB (A/T): (g / (mu0 mu_r) + a l / (mu0 mu_i (1 - a B / B_sat)^2)) / N."""
+        a = self.gap_to_steel_area
+        steel = a * self.steel_path_m / (MU0 * self.steel_initial_relative_permeability * (1.0 - a * field_t / self.steel_saturation_t) ** 2)
+        return (self.gap_m / (MU0 * self.mrf_relative_permeability) + steel) / self.turns
 
     @property
     def max_field_t(self) -> float:
@@ -57,10 +68,9 @@ class Coil:
         b = float(field_t)
         if not (math.isfinite(b) and b >= 0):
             raise InputError("a field >= 0 T", got=field_t, column="field_t")
-        b_steel = b * self.gap_to_steel_area
-        if b_steel >= self.steel_saturation_t:
+        if b * self.gap_to_steel_area >= self.steel_saturation_t:
             raise InputError(f"a field below {self.steel_saturation_t / self.gap_to_steel_area:.3f} T (steel saturation)", got=b, column="field_t")
-        return (b / (MU0 * self.mrf_relative_permeability) * self.gap_m + self._steel_h(b_steel) * self.steel_path_m) / self.turns
+        return float(self.current(b))
 
     def field_for_current(self, current_a: float) -> float:
         """The gap field for a coil current (inverse of current_for_field)."""

@@ -21,12 +21,11 @@ the driver, the fluid's response time or the thermal path. The expressions take 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from absorber.coil import MU0, Coil
+from absorber.coil import Coil
 from absorber.mrf import MRFAbsorber
 from posedyn.errors import check_non_negative, check_positive
 
@@ -58,33 +57,15 @@ class CoilDrive:
         return self.resistance_ohm * (1.0 + self.resistance_tempco_per_k * (temperature_c - self.reference_c))
 
 
-def coil_current(coil: Coil, field_t, xp=np):
-    """i(B) = (B g / (mu0 mu_r) + H_steel(B A_gap / A_steel) l) / N (`Coil.current_for_field`)."""
-    b_steel = field_t * coil.gap_to_steel_area
-    h_steel = b_steel / (MU0 * coil.steel_initial_relative_permeability * (1.0 - b_steel / coil.steel_saturation_t))
-    return (field_t / (MU0 * coil.mrf_relative_permeability) * coil.gap_m + h_steel * coil.steel_path_m) / coil.turns
-
-
-def coil_current_slope(coil: Coil, field_t, xp=np):
-    """di/dB (A/T) of `coil_current`: (g / (mu0 mu_r) + a l / (mu0 mu_i (1 - a B / B_sat)^2)) / N."""
-    a = coil.gap_to_steel_area
-    steel = a * coil.steel_path_m / (MU0 * coil.steel_initial_relative_permeability * (1.0 - a * field_t / coil.steel_saturation_t) ** 2)
-    return (coil.gap_m / (MU0 * coil.mrf_relative_permeability) + steel) / coil.turns
-
-
 def absorber_frequency(absorber: MRFAbsorber, drive: CoilDrive, fluid_field_t, temperature_c, xp=np):
     """f_a(B_f, T) (Hz): seed 004 eq. 15 with G1(B_f) exp(-a_T (T - T_G))."""
-    b = xp.fmax(fluid_field_t, 1e-12)
-    g1 = absorber.g0_pa + (absorber.ginf_pa - absorber.g0_pa) * (1.0 - xp.exp(-absorber.a1 * b**absorber.a2))
-    g1 = g1 * xp.exp(-drive.modulus_tempco_per_k * (temperature_c - drive.modulus_reference_c))
-    a1 = 4.0 * absorber.l1_m * absorber.w1_m
-    a2 = math.pi * (absorber.r2_m**2 - absorber.r1_m**2)
-    return xp.sqrt((g1 * a1 / absorber.h1_m + absorber.g2_pa * a2 / absorber.h2_m) / absorber.mass_kg) / (2.0 * math.pi)
+    g1 = absorber.storage_modulus(xp.fmax(fluid_field_t, 1e-12), xp)
+    return absorber.frequency_for_modulus(g1 * xp.exp(-drive.modulus_tempco_per_k * (temperature_c - drive.modulus_reference_c)), xp)
 
 
 def field_rates(coil: Coil, drive: CoilDrive, field_t, fluid_field_t, temperature_c, voltage_v, xp=np):
     """(dB/dt, dB_f/dt, dT/dt) of the module docstring's equations."""
-    current = coil_current(coil, field_t, xp)
+    current = coil.current(field_t, xp)
     resistance = drive.resistance(temperature_c, xp)
     d_field = (voltage_v - resistance * current) / (coil.turns * drive.gap_area_m2)
     d_fluid = (field_t - fluid_field_t) / drive.fluid_lag_s
@@ -94,4 +75,4 @@ def field_rates(coil: Coil, drive: CoilDrive, field_t, fluid_field_t, temperatur
 
 def inductance_h(coil: Coil, drive: CoilDrive, field_t: float) -> float:
     """Differential inductance L = N A_gap / (di/dB) at a field (falls as the steel saturates)."""
-    return coil.turns * drive.gap_area_m2 / coil_current_slope(coil, field_t)
+    return coil.turns * drive.gap_area_m2 / coil.current_slope(field_t)

@@ -35,7 +35,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from absorber.coil import Coil
-from absorber.coil_dynamics import CoilDrive, absorber_frequency, coil_current, coil_current_slope, field_rates
+from absorber.coil_dynamics import CoilDrive, absorber_frequency, field_rates
 from absorber.mrf import MRFAbsorber
 from posedyn.errors import InputError
 
@@ -49,10 +49,10 @@ def shooting_step(coil: Coil, drive: CoilDrive, state, voltage_v, step_s, subste
     flux = coil.turns * drive.gap_area_m2
     for _ in range(substeps):
         resistance = drive.resistance(t, xp)
-        rate = (voltage_v - resistance * coil_current(coil, b, xp)) / flux
-        z = -h * resistance * coil_current_slope(coil, b, xp) / flux  # h x d(rate)/dB < 0
+        rate = (voltage_v - resistance * coil.current(b, xp)) / flux
+        z = -h * resistance * coil.current_slope(b, xp) / flux  # h x d(rate)/dB < 0
         b_next = b + h * (xp.exp(z) - 1.0) / z * rate  # exponential Euler: exact for a linear coil, stable at any h
-        current = coil_current(coil, 0.5 * (b + b_next), xp)
+        current = coil.current(0.5 * (b + b_next), xp)
         t = t + h * (resistance * current**2 - (t - drive.ambient_c) / drive.thermal_resistance_k_per_w) / drive.heat_capacity_j_per_k
         b_f = b_next - (b_next - b) * tau / h * (1.0 - decay) + (b_f - b) * decay  # the lag, exact for B linear over the substep
         b = b_next
@@ -118,7 +118,7 @@ class FieldPlanner:
         vmax = drive.voltage_limit_v
         opti.subject_to(opti.bounded(-vmax, V, vmax))
         opti.subject_to(opti.bounded(0.0, X[0, 1:], absorber.field_max_t))
-        opti.subject_to(coil_current(coil, X[0, 1:], cs) <= coil.max_current_a)
+        opti.subject_to(coil.current(X[0, 1:], cs) <= coil.max_current_a)
         opti.subject_to(X[2, 1:] <= drive.temperature_limit_c)
         f = freq.map(intervals + 1)(X)
         mistune = (f - self.target) / self.target
@@ -167,7 +167,7 @@ class FieldPlanner:
         else:
             guess = np.array([self.absorber.field_for_frequency(float(f), clamp=True).field_t for f in np.clip(target_hz, lo, hi)])
             opti.set_initial(self.X, np.vstack([guess, guess, np.full_like(guess, x0[2])]))
-            opti.set_initial(self.V, (self.drive.resistance_ohm * np.array([coil_current(self.coil, b) for b in guess[1:]]))[None, :])
+            opti.set_initial(self.V, (self.drive.resistance_ohm * np.array([self.coil.current(b) for b in guess[1:]]))[None, :])
         start = time.perf_counter()
         try:
             sol = opti.solve()
@@ -180,7 +180,7 @@ class FieldPlanner:
         stats = opti.stats()
         return FieldPlan(
             time_s=time_s, voltage_v=V, field_t=X[0], fluid_field_t=X[1], temperature_c=X[2],
-            current_a=np.array([coil_current(self.coil, b) for b in X[0]]),
+            current_a=np.array([self.coil.current(b) for b in X[0]]),
             frequency_hz=np.array([float(absorber_frequency(self.absorber, self.drive, bf, t)) for bf, t in zip(X[1], X[2])]),
             target_hz=target_hz,
             solver={"status": status, "iterations": int(stats.get("iter_count", -1)), "seconds": seconds},
@@ -192,15 +192,23 @@ def simulate(coil: Coil, drive: CoilDrive, absorber: MRFAbsorber, time_s, voltag
     """The same equations integrated by scipy (Radau, an implicit method sharing nothing with the
     planner's shooting) under the piecewise-constant voltages: (B, B_f, T, current, f_a) at the
     nodes."""
+    voltages = np.asarray(voltage_v, dtype=float)
+    return _integrate(coil, drive, absorber, time_s, lambda k, x: voltages[k], initial_state, rtol)
+
+
+def _integrate(coil: Coil, drive: CoilDrive, absorber: MRFAbsorber, time_s, voltage_of, initial_state, rtol: float):
+    """(B, B_f, T, current, f_a) at the nodes, scipy's Radau interval by interval with the voltage
+    `voltage_of(interval, state)`."""
     time_s = np.asarray(time_s, dtype=float)
     state = np.array([0.0, 0.0, drive.ambient_c] if initial_state is None else initial_state, dtype=float)
     out = [state]
-    for k, v in enumerate(np.asarray(voltage_v, dtype=float)):
-        sol = solve_ivp(lambda t, x: field_rates(coil, drive, x[0], x[1], x[2], v), (time_s[k], time_s[k + 1]), state, method="Radau", rtol=rtol, atol=1e-12)
+    for k in range(len(time_s) - 1):
+        sol = solve_ivp(lambda t, x: field_rates(coil, drive, x[0], x[1], x[2], voltage_of(k, x)), (time_s[k], time_s[k + 1]), state,
+                        method="Radau", rtol=rtol, atol=1e-12)
         state = sol.y[:, -1]
         out.append(state)
     X = np.array(out).T
-    current = np.array([coil_current(coil, b) for b in X[0]])
+    current = np.array([coil.current(b) for b in X[0]])
     freq = np.array([float(absorber_frequency(absorber, drive, bf, t)) for bf, t in zip(X[1], X[2])])
     return X[0], X[1], X[2], current, freq
 
@@ -211,24 +219,12 @@ def step_schedule(coil: Coil, drive: CoilDrive, absorber: MRFAbsorber, time_s, t
     driver (V = R i* + K (i* - i), clipped to the voltage limit; K = 500 V/A, a loop far faster
     than the coil), with no anticipation and no temperature correction. Integrated by scipy:
     (B, B_f, T, current, f_a) at the nodes, and the largest |V| the loop asked for."""
-    time_s = np.asarray(time_s, dtype=float)
     lo, hi = absorber.range_hz
     setpoints = [coil.current_for_field(absorber.field_for_frequency(float(f), clamp=True).field_t) for f in np.clip(target_hz, lo, hi)]
-    state = np.array([0.0, 0.0, drive.ambient_c] if initial_state is None else initial_state, dtype=float)
-    out, asked = [state], 0.0
-    for k in range(len(time_s) - 1):
-        def voltage(x, i_set=setpoints[k]):
-            return drive.resistance(x[2]) * i_set + gain_v_per_a * (i_set - coil_current(coil, x[0]))
 
-        def rates(t, x):
-            return field_rates(coil, drive, x[0], x[1], x[2], float(np.clip(voltage(x), -drive.voltage_limit_v, drive.voltage_limit_v)))
+    def asked(k, x):
+        return drive.resistance(x[2]) * setpoints[k] + gain_v_per_a * (setpoints[k] - coil.current(x[0]))
 
-        asked = max(asked, abs(voltage(state)))
-        sol = solve_ivp(rates, (time_s[k], time_s[k + 1]), state, method="Radau", rtol=1e-8, atol=1e-12)
-        state = sol.y[:, -1]
-        out.append(state)
-    X = np.array(out).T
-    current = np.array([coil_current(coil, b) for b in X[0]])
-    freq = np.array([float(absorber_frequency(absorber, drive, bf, t)) for bf, t in zip(X[1], X[2])])
-    return X[0], X[1], X[2], current, freq, asked
-
+    B, Bf, T, current, freq = _integrate(coil, drive, absorber, time_s, lambda k, x: float(np.clip(asked(k, x), -drive.voltage_limit_v, drive.voltage_limit_v)),
+                                         initial_state, 1e-8)
+    return B, Bf, T, current, freq, max(abs(asked(k, x)) for k, x in enumerate(zip(B[:-1], Bf[:-1], T[:-1])))

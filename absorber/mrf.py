@@ -26,6 +26,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from posedyn.errors import InputError, check_non_negative, check_positive
 
 
@@ -77,7 +79,15 @@ class MRFAbsorber:
         b = float(field_t)
         if not (math.isfinite(b) and b >= 0):
             raise InputError("a field >= 0 T", got=field_t, column="field_t")
-        return self.g0_pa + (self.ginf_pa - self.g0_pa) * (1.0 - math.exp(-self.a1 * b**self.a2))
+        return float(self.storage_modulus(b))
+
+    def storage_modulus(self, field_t, xp=np):
+        """G1(B) unchecked, `xp` numpy or casadi (the coil's dynamics and planner)."""
+        return self.g0_pa + (self.ginf_pa - self.g0_pa) * (1.0 - xp.exp(-self.a1 * field_t**self.a2))
+
+    def frequency_for_modulus(self, g1_pa, xp=np):
+        """f_a = sqrt((G1 A1 / h1 + G2 A2 / h2) / m_a) / (2 pi) for a storage modulus G1."""
+        return xp.sqrt((g1_pa * self.a1_m2 / self.h1_m + self.elastomer_stiffness_n_per_m) / self.mass_kg) / (2.0 * math.pi)
 
     def _mrf_stiffness(self, g1_pa: float) -> float:
         return g1_pa * self.a1_m2 / self.h1_m
@@ -92,7 +102,7 @@ class MRFAbsorber:
 
     def natural_frequency_hz(self, field_t: float) -> float:
         """f_a(B) (seed 004 eq. 15)."""
-        return math.sqrt(self.stiffness_n_per_m(field_t) / self.mass_kg) / (2.0 * math.pi)
+        return float(self.frequency_for_modulus(self.storage_modulus_pa(field_t)))
 
     def damping_ratio(self, field_t: float) -> float:
         """Equivalent viscous damping ratio from the loss factors (assumption; see the module)."""

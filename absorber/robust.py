@@ -82,7 +82,7 @@ def chatter_grid(host: Host, points: int = 1500) -> np.ndarray:
 
 
 def _host_and_absorber(k, fn, zeta, omega, tuning: Tuning | None, nominal: Host):
-    """(s, host dynamic stiffness M s^2 + C s + K, the absorber's dynamic stiffness
+    """(host dynamic stiffness M s^2 + C s + K, the absorber's dynamic stiffness
     m s^2 Z / (m s^2 + Z) or 0), shapes (samples, len(omega))."""
     k, fn, zeta = (np.asarray(v, dtype=float)[:, None] for v in (k, fn, zeta))
     wn = 2.0 * math.pi * fn
@@ -90,17 +90,17 @@ def _host_and_absorber(k, fn, zeta, omega, tuning: Tuning | None, nominal: Host)
     s = 1j * np.asarray(omega, dtype=float)[None, :]
     host = mass * s**2 + 2.0 * zeta * np.sqrt(k * mass) * s + k
     if tuning is None:
-        return s, host, np.zeros_like(host)
+        return host, np.zeros_like(host)
     w0 = 2.0 * math.pi * nominal.fn_hz
     z = nominal.mass_kg * w0**2 * tuning.impedance(s / w0)  # Z = M0 w0^2 Z~(s / w0)
     m = tuning.mass_ratio * nominal.mass_kg
-    return s, host, m * s**2 * z / (m * s**2 + z)
+    return host, m * s**2 * z / (m * s**2 + z)
 
 
 def receptance(k: np.ndarray, fn: np.ndarray, zeta: np.ndarray, omega: np.ndarray, tuning: Tuning | None, nominal: Host) -> np.ndarray:
     """G(i w) (m/N) of hosts (k, fn, zeta), shape (samples, len(omega)), with the absorber tuned
     for `nominal` (None: no absorber)."""
-    _, host, absorber = _host_and_absorber(k, fn, zeta, omega, tuning, nominal)
+    host, absorber = _host_and_absorber(k, fn, zeta, omega, tuning, nominal)
     return 1.0 / (host + absorber)
 
 
@@ -112,7 +112,7 @@ def actuator_force_frf(k: np.ndarray, fn: np.ndarray, zeta: np.ndarray, omega: n
 
     the absorber's dynamic stiffness times the host's displacement (L = Z, the layout's
     impedance)."""
-    _, host, absorber = _host_and_absorber(k, fn, zeta, omega, tuning, nominal)
+    host, absorber = _host_and_absorber(k, fn, zeta, omega, tuning, nominal)
     return -absorber / (host + absorber)
 
 
