@@ -39,10 +39,10 @@ from absorber.mrf import FieldSetting, MRFAbsorber
 from absorber.robust import Z95
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.errors import InputError, check_choice
-from posedyn.robot import pose_rotation
+from posedyn.robot import GridPose, Robot, TwinParameters, direction_rows, pose_modes, pose_rotation, tool_pose
 from posedyn.stability import Cut, StabilityResult, critical_points, zoa
 from posedyn.stability.critical import REL_TOL
-from posedyn.table import ModalTable
+from posedyn.table import ModalTable, PoseSet
 from posedyn.uncertainty import ModalDistribution, distributions_from_table
 
 POLICIES = ("match", "sims", "depth")
@@ -199,6 +199,23 @@ def table_pose_modes(table: ModalTable, distributions: list[ModalDistribution] |
     return out
 
 
+def twin_pose_modes(robot: Robot, params: TwinParameters, poses: PoseSet, index=None) -> dict[int, PoseModes]:
+    """{pose index: PoseModes} straight from the robot twin (its 3-D mode shapes, which a modal
+    table's per-direction rows cannot hold) for the reachable poses among `index` (default all)."""
+    data = robot.model.createData()
+    count = params.robot_modes_per_direction
+    out = {}
+    for i in range(len(poses)) if index is None else index:
+        pose = tool_pose(poses, i)
+        try:
+            _, modes = pose_modes(robot, GridPose(pose.label, pose), params, data=data)
+        except InputError:
+            continue
+        rows = tuple((d, m, fn, z, k, 0.0) for d in ("x", "y", "z") for m, (fn, z, k) in enumerate(direction_rows(modes, d, count), 1))
+        out[i] = PoseModes(poses.pose_id[i], modes.dynamics(), rows, pose.rotation)
+    return out
+
+
 def coupled(dyn: ToolTipDynamics, config: ScheduleConfig, field_t: float) -> ToolTipDynamics:
     """Host plus the MRF absorber at a field (`absorber.coupling.with_absorber`)."""
     a = config.absorber
@@ -245,12 +262,20 @@ def coupled_depth_m(dyn: ToolTipDynamics, config: ScheduleConfig, targets_hz, fi
     default tuned there by its field (and the damping that field gives); with `fields_t`, at that
     frequency with that field's damping (a trajectory's absorber, its temperature in the
     frequency). The converged engine, or `steps`."""
+    targets = np.atleast_1d(np.asarray(targets_hz, dtype=float))
+    return absorber_depths_m([dyn] * len(targets), config, targets, fields_t)
+
+
+def absorber_depths_m(dyns: list[ToolTipDynamics], config: ScheduleConfig, targets_hz, fields_t=None) -> np.ndarray:
+    """`coupled_depth_m` with one host per target (a trajectory's points at several poses), all
+    solved in one batch."""
     a = config.absorber
     targets = np.atleast_1d(np.asarray(targets_hz, dtype=float))
     if fields_t is None:
-        structures = [coupled(dyn, config, a.field_for_frequency(float(f), clamp=True).field_t) for f in targets]
+        structures = [coupled(d, config, a.field_for_frequency(float(f), clamp=True).field_t) for d, f in zip(dyns, targets)]
     else:
-        structures = [with_absorber(dyn, a.mass_kg, a.mass_kg * (2 * math.pi * f) ** 2, a.damping_ratio(float(b)), config.directions) for f, b in zip(targets, fields_t)]
+        structures = [with_absorber(d, a.mass_kg, a.mass_kg * (2 * math.pi * f) ** 2, a.damping_ratio(float(b)), config.directions)
+                      for d, f, b in zip(dyns, targets, fields_t)]
     return np.array([r.depth_m for r in critical_points(structures, config.cut, config.rpm, config.steps, frequencies=False)])
 
 

@@ -11,13 +11,14 @@ from typing import Optional
 import numpy as np
 import typer
 
-from absorber.chain import ScheduleConfig, coupled_depth_m, depth_weight, schedule_poses, table_pose_modes
+from absorber.chain import ScheduleConfig, absorber_depths_m, depth_weight, schedule_poses, table_pose_modes, twin_pose_modes
 from absorber.coil_dynamics import CoilDrive
 from absorber.field_plan import FieldPlanner, simulate, step_schedule
 from absorber.files import read_absorber
 from posedyn.io.atomic import write_text_atomic
 from posedyn.io.cut import read_cut
 from posedyn.io.modal_csv import read_tool_path
+from posedyn.io.twin_file import load_twin
 from posedyn.errors import InputError
 from service.cli.absorber import Policy
 from service.cli.common import console, modal_table_for, print_json, resolve_cut
@@ -28,6 +29,7 @@ COLUMNS = ("time_s", "pose_id", "target_hz", "voltage_v", "current_a", "field_mt
 def plan(
     model_dir: Optional[Path] = typer.Argument(None, help="Model directory (or give --modes)."),
     modes: Optional[Path] = typer.Option(None, "--modes", help="Modal table with the path's poses instead of a model."),
+    twin: Optional[Path] = typer.Option(None, "--twin", help="Robot twin file: its modes at the path's poses (3-D mode shapes) instead of a model."),
     path: Path = typer.Option(..., "--path", help="Timed tool path: the pose columns and time_s (s, increasing), one row per point."),
     cut: Optional[Path] = typer.Option(None, "--cut", help="Cut file (default: MODEL_DIR/cut.toml)."),
     absorber: Optional[Path] = typer.Option(None, "--absorber", help="Absorber file (default: seed 004's design)."),
@@ -44,7 +46,7 @@ def plan(
     columns = np.column_stack(list(poses.numeric_columns().values()))
     unique, back = np.unique(columns, axis=0, return_inverse=True)  # a path dwells: each distinct pose once
     first = [int(np.flatnonzero(back.ravel() == u)[0]) for u in range(len(unique))]
-    entries = schedule_poses(table_pose_modes(modal_table_for(model_dir, modes, poses.subset(first))), config)
+    entries = schedule_poses(_path_modes(model_dir, modes, twin, poses.subset(first), path), config)
     weights = [_weight(e, config) for e in entries]
     back = back.ravel()
     target = np.array([entries[u].absorber.target_hz for u in back])
@@ -83,14 +85,29 @@ def plan(
     console.print(json.dumps(summary, indent=2))
 
 
+def _path_modes(model_dir, modes, twin, poses, path) -> list:
+    """The PoseModes of the path's distinct poses from one source: a model, a modal table or the
+    twin (every pose must be reachable)."""
+    if sum(x is not None for x in (model_dir, modes, twin)) != 1:
+        raise InputError("one mode source: MODEL_DIR, --modes MODAL.csv or --twin TWIN.toml", got="none" if model_dir is None and modes is None else "more than one", column="--twin")
+    if twin is None:
+        return table_pose_modes(modal_table_for(model_dir, modes, poses))
+    found = twin_pose_modes(*load_twin(twin), poses)
+    missing = [poses.pose_id[i] for i in range(len(poses)) if i not in found]
+    if missing:
+        raise InputError("poses the twin robot can reach", got=missing[:3], file=str(path), column="pose_id")
+    return [found[i] for i in range(len(poses))]
+
+
 def _depths(entries, pose_of_point, frequency_hz, fluid_field_t, config: ScheduleConfig) -> np.ndarray:
     """Critical depth (m) at every point with the absorber as a trajectory has it there; one
-    solve per distinct pose and frequency (to 0.01 Hz)."""
+    solve per distinct pose and frequency (to 0.01 Hz), all in one batch."""
     keys = [(int(p), round(float(f), 2)) for p, f in zip(pose_of_point, frequency_hz)]
     found = {}
     for key, f, b in zip(keys, frequency_hz, fluid_field_t):
         found.setdefault(key, (f, b))
-    out = {key: coupled_depth_m(entries[key[0]].pose.dyn, config, [f], [b])[0] for key, (f, b) in found.items()}
+    depths = absorber_depths_m([entries[p].pose.dyn for p, _ in found], config, [f for f, _ in found.values()], [b for _, b in found.values()])
+    out = dict(zip(found, depths))
     return np.array([out[k] for k in keys])
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from absorber.chain import PoseModes, ScheduleConfig, coupled, schedule_poses, table_pose_modes
+from absorber.chain import PoseModes, ScheduleConfig, coupled, schedule_poses, table_pose_modes, twin_pose_modes
 from absorber.files import load_tuning_cache, read_absorber, read_actuator, save_tuning_cache
 from absorber.tuning import known_tunings
 from posedyn.errors import InputError
@@ -27,7 +27,7 @@ from posedyn.io.cut import read_cut, read_sle_cut
 from posedyn.io.model_dir import load_model
 from posedyn.io.twin_file import load_twin
 from posedyn.posemodel import PoseModel
-from posedyn.robot import GridPose, Robot, TwinParameters, direction_rows, pose_modes, tool_pose
+from posedyn.robot import Robot, TwinParameters, tool_pose
 from posedyn.sle import SleCut, sle_m
 from posedyn.stability import critical_lobes
 from posedyn.table import PoseSet
@@ -73,18 +73,7 @@ def pose_modes_of(ctx: SweepContext, poses: PoseSet, index: list[int]) -> dict[i
 
 
 def _twin_modes(ctx: SweepContext, poses: PoseSet, index: list[int]) -> dict[int, PoseModes]:
-    data = ctx.robot.model.createData()
-    count = ctx.twin_params.robot_modes_per_direction
-    out = {}
-    for i in index:
-        pose = tool_pose(poses, i)
-        try:
-            _, modes = pose_modes(ctx.robot, GridPose(pose.label, pose), ctx.twin_params, data=data)
-        except InputError:
-            continue
-        rows = tuple((d, m, fn, z, k, 0.0) for d in ("x", "y", "z") for m, (fn, z, k) in enumerate(direction_rows(modes, d, count), 1))
-        out[i] = PoseModes(poses.pose_id[i], modes.dynamics(), rows, pose.rotation)
-    return out
+    return twin_pose_modes(ctx.robot, ctx.twin_params, poses, index)
 
 
 def _model_modes(ctx: SweepContext, poses: PoseSet, index: list[int]) -> dict[int, PoseModes]:
