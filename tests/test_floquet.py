@@ -127,3 +127,14 @@ def test_a_flip_lobe_peak_is_found_where_the_seeds_give_nothing():
         assert point.chatter_hz == pytest.approx(1.5 * 4 * rpm / 60, rel=1e-6)
         sdm = critical_points([dyn], cut, rpm, steps=160)[0]
         assert point.depth_m == pytest.approx(sdm.depth_m, rel=0.02)
+
+
+def test_no_boundary_point_found_is_unknown_not_never_chatters(monkeypatch):
+    """Where the engine finds no boundary point (here: its seeds and repair both taken away) the
+    depth is NaN and not converged, never inf, which would read as "never chatters"."""
+    from posedyn.stability import critical_points
+
+    monkeypatch.setattr(converged, "zoa_seeds", lambda *a, **k: (np.zeros(0), np.zeros(0), np.zeros(0, int)))
+    monkeypatch.setattr(converged, "_repair", lambda *a, **k: None)
+    result = critical_points([ONE_DOF], CUT, 9000.0)[0]
+    assert math.isnan(result.depth_m) and result.converged is False

@@ -1125,8 +1125,9 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
     for j, (s, e) in enumerate(jobs):
         mine = np.flatnonzero(ej == j)
         r = float(rpm[e])
-        if not len(mine):
-            points.append(CriticalPoint(r, np.inf, np.nan, np.nan, (), base, np.nan, False, verified[j], ()))
+        if not len(mine):  # no boundary point found: proven absent only where no cutting force reaches the structure
+            inert = not np.any(char(s, 0, True).W)
+            points.append(CriticalPoint(r, np.inf, np.nan, np.nan, (), base, 0.0 if inert else np.nan, inert, True if inert else verified[j], ()))
             continue
         lv = level_job[j]
         branches = []
