@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 import independent_milling_sim as sim
@@ -106,15 +107,21 @@ MISSED = {
 def test_a_missed_lower_branch_is_repaired_the_same_way_by_descent_and_by_bisection(name, monkeypatch):
     """The winding count finds multipliers outside the unit circle below the seeds' answer; the
     repair by Newton descent from the multipliers nearest 1 / nu gives the same boundary point as
-    the bisection on the count (forced here by disabling the descent)."""
+    the bisection on the count (forced here by disabling the descent). The period-doubling seeds
+    (`flip_seeds`, switched off for the repair) reach the flip branches without any repair."""
     from posedyn.stability import floquet
 
     dyn = structure(MISSED[name])
+    seeded = floquet.critical_depth(dyn, CUT, 800.0)
+    monkeypatch.setattr(floquet, "FLIP_POINTS", 0)
     fast = floquet.critical_depth(dyn, CUT, 800.0)
     monkeypatch.setattr(floquet, "_descend", lambda *args: None)
     slow = floquet.critical_depth(dyn, CUT, 800.0)
     assert fast.repaired and fast.verified and fast.converged
     assert fast.depth_m == pytest.approx(slow.depth_m, rel=1e-9) and fast.theta_rad == pytest.approx(slow.theta_rad, abs=1e-9)
+    assert seeded.verified and seeded.converged and seeded.depth_m == pytest.approx(fast.depth_m, rel=1e-6)
+    if fast.theta_rad == pytest.approx(np.pi):
+        assert not seeded.repaired
 
 
 #: The ranges exploration's second silent miss (3 teeth, 2416 rpm, a/D 0.55, down; modes to 9.6 kHz):

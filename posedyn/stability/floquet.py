@@ -229,6 +229,13 @@ def _segment_angles(cut: Cut, substeps_per_rad: float):
     return lo, hi, H, cutting
 
 
+def _complex_or_real(c) -> np.ndarray:
+    """c as a flat array: float where every value is real (a real monodromy costs a quarter),
+    complex otherwise."""
+    c = np.asarray(c).reshape(-1)
+    return c.astype(float) if not np.iscomplexobj(c) else c.astype(complex)
+
+
 class FloquetCharacteristic:
     """det(I - nu M(c)) of one structure and cut at one resolution, batched over (c, nu, tau)."""
 
@@ -277,27 +284,28 @@ class FloquetCharacteristic:
         return self._free_eig_inv
 
     def generators(self, c: np.ndarray) -> np.ndarray:
-        """A_i(c) for every segment, (s, B, 2n, 2n) complex (balanced coordinates)."""
+        """A_i(c) for every segment, (s, B, 2n, 2n), real for real c (balanced coordinates)."""
         n = self.n
-        c = np.asarray(c, dtype=complex).reshape(-1)
-        A = np.broadcast_to(self.A0, (len(self.fraction), len(c), 2 * n, 2 * n)).astype(complex)
+        c = _complex_or_real(c)
+        A = np.broadcast_to(self.A0, (len(self.fraction), len(c), 2 * n, 2 * n)).astype(c.dtype)
         A[:, :, n:, :n] -= c[None, :, None, None] * self.W[:, None] / self.scale
         return A
 
     def monodromy(self, c: np.ndarray, tau: np.ndarray) -> np.ndarray:
-        """M(c) over one tooth period tau, (B, 2n, 2n). Free-flight segments use A0 (no c)."""
-        c = np.asarray(c, dtype=complex).reshape(-1)
+        """M(c) over one tooth period tau, (B, 2n, 2n), real for real c (flip: nu = -1). Free-flight
+        segments use A0 (no c)."""
+        c = _complex_or_real(c)
         tau = np.broadcast_to(np.asarray(tau, dtype=float).reshape(-1), c.shape)
         n2 = 2 * self.n
         cut_idx = np.flatnonzero(self.cutting)
         A = self.generators(c)[cut_idx] * (self.fraction[cut_idx, None] * tau[None, :])[:, :, None, None]
-        E = np.empty((len(self.fraction), len(c), n2, n2), dtype=complex)
+        E = np.empty((len(self.fraction), len(c), n2, n2), dtype=c.dtype)
         E[cut_idx] = sdm.expm_batched(A.reshape(-1, n2, n2)).reshape(len(cut_idx), len(c), n2, n2)
         free_idx = np.flatnonzero(~self.cutting)
         if len(free_idx):  # independent of c: once per distinct delay
             utau, inverse = np.unique(tau, return_inverse=True)
             Af = self.A0[None, None] * (self.fraction[free_idx, None] * utau[None, :])[:, :, None, None]
-            Ef = sdm.expm_batched(Af.reshape(-1, n2, n2).astype(complex)).reshape(len(free_idx), len(utau), n2, n2)
+            Ef = sdm.expm_batched(Af.reshape(-1, n2, n2).astype(c.dtype)).reshape(len(free_idx), len(utau), n2, n2)
             E[free_idx] = Ef[:, inverse.reshape(-1)]
         M = E[0]
         for i in range(1, len(E)):
@@ -483,6 +491,38 @@ def zoa_seeds(dyn: ToolTipDynamics, cut: Cut, tau: float, char: FloquetCharacter
                 thetas.append(np.mod(wc * tau, 2.0 * np.pi))
                 modes.append(r)
     return np.array(depths), np.array(thetas), np.array(modes, dtype=int)
+
+
+#: Period-doubling seeds: the flip condition (a real multiplier at -1, theta = pi, c = 2 a real)
+#: is scanned at FLIP_POINTS depths from FLIP_RANGE[0] to FLIP_RANGE[1] x the job's lowest
+#: zeroth-order seed (0: no scan; the winding count's repair then finds flip lobes, at ~10x the cost).
+FLIP_POINTS = 20
+FLIP_RANGE = (0.1, 4.0)
+
+
+def flip_seeds(char, a_scale, tau, jobs) -> list:
+    """[(job, depth)] where a real multiplier of M(2 a) passes below -1 between two of the scanned
+    depths (the number of real multipliers below -1 grows; often just after a complex pair has
+    met on the negative axis), placed by linear interpolation of Re sigma + 1 of the multiplier
+    nearest -1; one batch for all the jobs of a structure (depth scale a_scale and delay tau per
+    job)."""
+    grid = np.geomspace(*FLIP_RANGE, FLIP_POINTS)
+    a = (np.asarray(a_scale, dtype=float)[:, None] * grid[None, :]).ravel()
+    with np.errstate(all="ignore"):
+        sigma = np.linalg.eigvals(char.monodromy(2.0 * a, np.repeat(tau, FLIP_POINTS)))
+    real = np.abs(sigma.imag) <= 1e-9 * np.maximum(np.abs(sigma), 1e-300)
+    below = (real & (sigma.real < -1.0)).sum(axis=1).reshape(len(jobs), FLIP_POINTS)
+    nearest = sigma[np.arange(len(sigma)), np.argmin(np.abs(sigma + 1.0), axis=1)].real.reshape(len(jobs), FLIP_POINTS) + 1.0
+    a = a.reshape(len(jobs), FLIP_POINTS)
+    out = []
+    for q, j in enumerate(jobs):
+        cross = np.flatnonzero(np.diff(below[q]) > 0)
+        if len(cross):
+            k = cross[0]
+            x, y = a[q, k : k + 2], nearest[q, k : k + 2]
+            inside = np.all(np.isfinite(y)) and y[0] > 0 >= y[1]
+            out.append((j, float(x[0] + (x[1] - x[0]) * y[0] / (y[0] - y[1])) if inside else float(np.sqrt(x[0] * x[1]))))
+    return out
 
 
 # --- boundary-point solvers ---------------------------------------------------------------------
@@ -874,6 +914,18 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
         seed_a += list(d[pick])
         seed_t += list(t[pick])
         seed_m += list(mode[pick])
+    if FLIP_POINTS:  # period-doubling seeds, which the zeroth order never gives (mode -1: the whole structure)
+        lowest = {}
+        for j, a_ in zip(seed_job, seed_a):
+            lowest[j] = min(lowest.get(j, np.inf), a_)
+        for s in range(len(dyns)):
+            mine = [j for j in range(len(jobs)) if jobs[j][0] == s and np.isfinite(lowest.get(j, np.inf))]
+            if mine:
+                for j, a_ in flip_seeds(char(s, seed_level), np.array([lowest[j] for j in mine]), tau_all[[jobs[j][1] for j in mine]], mine):
+                    seed_job.append(j)
+                    seed_a.append(a_)
+                    seed_t.append(np.pi)
+                    seed_m.append(-1)
     seed_job, seed_a, seed_t, seed_m = np.array(seed_job, int), np.array(seed_a), np.array(seed_t), np.array(seed_m, int)
     owners = np.array([jobs[j][0] for j in seed_job], int)
     seed_tau = tau_all[[jobs[j][1] for j in seed_job]] if len(seed_job) else np.zeros(0)
@@ -884,7 +936,7 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
     bands = {}
     for i in range(len(seed_a)):
         s_ = owners[i]
-        if PROJECT_SEEDS:
+        if PROJECT_SEEDS and seed_m[i] >= 0:
             if s_ not in bands:
                 bands[s_] = mode_bands(char(s_, seed_level))
                 if bands[s_] is not None:  # the pair whose eigenvector lives most on each mode
