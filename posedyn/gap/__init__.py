@@ -4,11 +4,11 @@ residual that stays unexplained (`analysis`). What predicts the baseline lives w
 (`service.gap`), which may use the absorber."""
 
 from posedyn.gap.analysis import (
-    LIBRARY, CandidateEffect, Fit, GapResult, Measurements, Parameter, analyse, chi2_p, fit, predict, residual_correlates,
-    separating_measurement,
+    LIBRARY, CandidateEffect, Fit, GapResult, Measurements, Noise, Parameter, analyse, chi2_p, confounded, fit, fit_noise, noise_verdict,
+    predict, residual_correlates, separating_measurement,
 )
 
 __all__ = [
-    "LIBRARY", "CandidateEffect", "Fit", "GapResult", "Measurements", "Parameter", "analyse", "chi2_p", "fit", "predict",
-    "residual_correlates", "separating_measurement",
+    "LIBRARY", "CandidateEffect", "Fit", "GapResult", "Measurements", "Noise", "Parameter", "analyse", "chi2_p", "confounded", "fit",
+    "fit_noise", "noise_verdict", "predict", "residual_correlates", "separating_measurement",
 ]

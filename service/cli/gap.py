@@ -46,7 +46,8 @@ def gap(
     if as_json:
         print(json.dumps(doc, indent=2, allow_nan=False))
         return
-    console.print(f"RMS normalised residual {result.rmse_before:.3g} -> {result.rmse_after:.3g} (noise 1); chi-square p {result.noise_p_before:.2g} -> {result.noise_p_after:.2g}")
+    console.print(f"RMS normalised residual {result.rmse_before:.3g} -> {result.rmse_after:.3g} (stated noise 1); chi-square p {result.noise_p_before:.2g} -> {result.noise_p_after:.2g}")
+    console.print(f"noise: {result.noise['verdict']}")
     for e in doc["effects"]:
         pars = ", ".join(f"{k} = {v:.4g} +- {e['parameter_std'][k]:.2g}" for k, v in e["parameters"].items())
         console.print(escape(f"named: {e['name']} ({pars}): {e['description']} [{e['source']}]"))

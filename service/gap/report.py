@@ -15,10 +15,11 @@ def render(m, baseline: np.ndarray, result, title: str) -> str:
     matplotlib.use("Agg")
     doc = result.to_json()
     parts = [f"<h1>{html.escape(title)}</h1>"]
-    verdict = "the residual after the named effects is noise" if result.explained else "the residual is still structured: no named effect in the library explains it fully"
+    verdict = "the residual after the named effects is noise (of the noise model below)" if result.explained else "the residual is still structured: no named effect in the library explains it fully"
     parts.append(
         f"<ul><li>{len(m)} measurements; RMS normalised residual {result.rmse_before:.3g} before, {result.rmse_after:.3g} after (noise level 1)</li>"
-        f"<li>chi-square p-value {result.noise_p_before:.3g} before, {result.noise_p_after:.3g} after: {verdict}</li></ul>"
+        f"<li>chi-square p-value {result.noise_p_before:.3g} before, {result.noise_p_after:.3g} after: {verdict}</li>"
+        f"<li>noise: {html.escape(result.noise['verdict'])}</li></ul>"
     )
     parts.append("<h2>Named effects</h2>")
     if doc["effects"]:

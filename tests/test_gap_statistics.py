@@ -1,0 +1,124 @@
+"""Issue 18, honest statistics: the gap workflow on campaigns it did not generate. The data here
+are made without the library's effect functions (other functional forms of the same physics,
+Student-t noise, noise larger than stated, conditions that vary together, an effect outside the
+library), 20 seeds per kind, and scored: right verdict in at least 18 of 20."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from posedyn.gap import Measurements, analyse, fit_noise
+
+SEEDS = range(20)
+FN_STD, K_STD = 0.003, 0.03  # stated relative std of fn and k (an impact test's)
+
+
+def campaign(seed: int, kind: str) -> tuple[Measurements, np.ndarray]:
+    """(measurements, the model's predictions): 12 poses, two robot modes each, fn and k rows
+    under random conditions (device mounted, force level, robot moving), the hidden cause of
+    `kind` written here from the physics."""
+    rng = np.random.default_rng(1000 + seed)
+    rows = []
+    for p in range(12):
+        x_mm, y_mm, beta = rng.uniform(1300, 1900), rng.uniform(-300, 300), rng.uniform(-60, 60)
+        for mode, direction in ((1, "x"), (2, "y")):
+            fn, k = rng.uniform(10.0, 20.0), 10 ** rng.uniform(6.0, 7.0)
+            for quantity, count in (("fn_hz", 4), ("k_n_per_m", 2)):
+                for _ in range(count):
+                    force = float(rng.choice([0.0, 400.0, 800.0, 1200.0]))
+                    device = float(rng.integers(0, 2)) if kind != "confounded" else float(force >= 800.0)
+                    rows.append(dict(pose_id=f"p{p}", direction=direction, mode=mode, quantity=quantity, fn=fn, k=k, x_mm=x_mm, y_mm=y_mm,
+                                     beta_deg=beta, force_n=force, device=device, moving=float(rng.integers(0, 2))))
+    n = len(rows)
+    col = {key: np.array([r[key] for r in rows]) for key in rows[0]}
+    fn, k, q = col["fn"], col["k"], col["quantity"]
+    model = np.where(q == "fn_hz", fn, k)
+    true_fn, true_k = fn.copy(), k.copy()
+    if kind in ("device", "confounded"):  # 8 kg on the tool: fn = sqrt(k / (m + M)) / 2 pi, k unchanged
+        mass = k / (2 * math.pi * fn) ** 2
+        true_fn = np.sqrt(k / (mass + 8.0 * col["device"])) / (2 * math.pi)
+    if kind == "softening_t":  # joint softening k / (1 + F / 3 kN): another form than the library's k (1 - a F)
+        true_k = k / (1.0 + col["force_n"] / 3000.0)
+        true_fn = fn / np.sqrt(1.0 + col["force_n"] / 3000.0)
+    if kind == "outside":  # the real robot stiffer towards the front: no library effect follows x
+        true_fn = fn * (1.0 + 0.03 * (col["x_mm"] - 1600.0) / 300.0)
+    truth = np.where(q == "fn_hz", true_fn, true_k)
+    std = np.where(q == "fn_hz", FN_STD, K_STD) * np.abs(truth)
+    if kind in ("student_t", "softening_t"):
+        noise = rng.standard_t(3.0, n)
+    elif kind == "wide":
+        noise = 1.7 * rng.standard_normal(n)
+    else:
+        noise = rng.standard_normal(n)
+    conditions = {c: col[c].astype(float) for c in ("x_mm", "y_mm", "beta_deg", "force_n", "device", "moving")}
+    conditions["model_k_n_per_m"] = k
+    m = Measurements(q.astype(str), truth + noise * std, std, col["pose_id"].astype(str), col["direction"].astype(str), col["mode"], conditions)
+    return m, model
+
+
+def named(result) -> list[str]:
+    return sorted(e["name"] for e in result.effects)
+
+
+def score(kind: str, right) -> int:
+    return sum(bool(right(analyse(*campaign(seed, kind)))) for seed in SEEDS)
+
+
+def test_noise_of_the_stated_std_no_claim():
+    assert score("noise", lambda r: not named(r) and not r.ambiguous and r.noise["model"] == "stated") >= 18
+
+
+def test_noise_larger_than_stated_is_reported_not_explained_by_an_effect():
+    """Real noise 1.7 x the stated std, nothing hidden: no effect, and the stated std is said to
+    look too small by about 1.7."""
+    def right(r):
+        return not named(r) and r.noise["model"] == "scaled" and 1.45 < r.noise["scale"] < 1.95 and "too small" in r.noise["verdict"]
+
+    assert score("wide", right) >= 18
+
+
+def test_heavy_tailed_noise_is_reported_not_read_as_an_effect():
+    """Student-t noise (3 degrees of freedom) with a random `moving` column: no spurious effect,
+    and the noise is not reported as the stated one (Student-t in 19 of 20 seeds, once Gaussian
+    1.4 x)."""
+    assert score("student_t", lambda r: not named(r) and r.noise["model"] != "stated") >= 18
+
+
+def test_force_softening_of_another_form_under_heavy_tailed_noise_is_named_alone():
+    """k / (1 + F / 3 kN) with Student-t noise: `force_level_stiffness` (the library's linear
+    form) and nothing else, no `moving_robot` from the outliers."""
+    assert score("softening_t", lambda r: named(r) == ["force_level_stiffness"]) >= 18
+
+
+def test_device_mass_is_named_and_estimated_within_ten_percent():
+    def right(r):
+        return named(r) == ["device_mass"] and abs(r.effects[0]["parameters"]["mass_kg"] - 8.0) <= 0.8
+
+    assert score("device", right) >= 18
+
+
+def test_a_device_mounted_only_at_high_force_is_undecided_not_claimed():
+    """The design itself ties the device to the force level: device mass and force softening are
+    reported as undecided, with the measurement that separates them."""
+    def right(r):
+        return not named(r) and r.ambiguous and sorted(r.ambiguous[0]["candidates"]) == ["device_mass", "force_level_stiffness"]
+
+    assert score("confounded", right) >= 18
+
+
+def test_an_effect_outside_the_library_is_unexplained_and_located():
+    def right(r):
+        return not named(r) and not r.explained and any(c["variable"] == "x_mm" for c in r.correlates)
+
+    assert score("outside", right) >= 18
+
+
+@pytest.mark.parametrize("dof", [3.0, 10.0])
+def test_fit_noise_recovers_the_scale_and_the_tails(dof):
+    r = 1.5 * np.random.default_rng(7).standard_t(dof, 2000)
+    noise = fit_noise(r)
+    assert noise.model == "student_t" and noise.scale == pytest.approx(1.5, rel=0.1) and noise.dof == pytest.approx(dof, rel=0.5)
+    assert fit_noise(np.random.default_rng(8).standard_normal(300)).model == "stated"
