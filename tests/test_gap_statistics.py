@@ -109,6 +109,33 @@ def test_a_device_mounted_only_at_high_force_is_undecided_not_claimed():
     assert score("confounded", right) >= 18
 
 
+def mrf_campaign(seed: int) -> tuple[Measurements, np.ndarray]:
+    """Absorber frequency rows at random field, temperature (15-45 C) and angle to gravity; the
+    fluid's modulus falls as exp(-a (T - 20 C)), a = 3e-3 / K, from the model's value at 20 C."""
+    rng = np.random.default_rng(500 + seed)
+    n = 48
+    field, temperature = rng.choice([0.0, 100.0, 200.0, 300.0, 400.0, 500.0], n), rng.uniform(15.0, 45.0, n)
+    model = 20.0 + 0.08 * field
+    truth = model * np.sqrt(np.exp(-3e-3 * (temperature - 20.0)))
+    std = 0.005 * truth
+    conditions = {"field_mt": field, "temperature_c": temperature, "absorber_angle_deg": rng.choice([0.0, 45.0, 90.0], n)}
+    m = Measurements(np.full(n, "absorber_fn_hz"), truth + rng.standard_normal(n) * std, std, np.full(n, "absorber"), np.full(n, ""), np.full(n, np.nan), conditions)
+    return m, model
+
+
+def test_an_mrf_temperature_law_with_another_reference_is_named_with_its_reference():
+    """exp(-a (T - 20 C)) where the library's model holds at 25 C: the law's reference temperature
+    is a parameter, so the drift is named alone (no absorber_gravity_stiffness for the offset),
+    a within 10 %, the reference within 2 C, and the residual brought to the stated noise."""
+    def right(r):
+        if named(r) != ["mrf_temperature_drift"]:
+            return False
+        p = r.effects[0]["parameters"]
+        return abs(p["modulus_drop_per_mk"] - 3.0) <= 0.3 and abs(p["reference_c"] - 20.0) <= 2.0 and r.rmse_after <= 1.5
+
+    assert sum(bool(right(analyse(*mrf_campaign(seed)))) for seed in SEEDS) >= 18
+
+
 def test_an_effect_outside_the_library_is_unexplained_and_located():
     def right(r):
         return not named(r) and not r.explained and any(c["variable"] == "x_mm" for c in r.correlates)

@@ -159,8 +159,10 @@ def _library() -> dict[str, CandidateEffect]:
         return _on(m, ("absorber_zeta",), y, y + t[0] * _cond(m, "field_mt") / 1000.0)
 
     def mrf_temperature(y, m, t):
-        dT = _cond(m, "temperature_c", 25.0) - 25.0
-        return _on(m, ("absorber_fn_hz",), y, y * np.sqrt(np.maximum(1.0 - t[0] * 1e-3 * dT, 1e-6)))
+        # G'(T) = G'(T_ref) exp(-a (T - T_ref)): the model's modulus holds at T_ref (seed 004's at
+        # 25 C, a fitted parameter here), f_a ~ sqrt(G')
+        dT = _cond(m, "temperature_c", t[1]) - t[1]
+        return _on(m, ("absorber_fn_hz",), y, y * np.exp(-0.5 * t[0] * 1e-3 * dT))
 
     def force_level(y, m, t):
         soft = np.maximum(1.0 - t[0] * _cond(m, "force_n") / 1000.0, 1e-3)
@@ -185,7 +187,7 @@ def _library() -> dict[str, CandidateEffect]:
         CandidateEffect("mrf_loss_modulus", "the MRF loss modulus adds field-dependent absorber damping (seed 004 keeps only G')", "seed 004 section 2 (storage modulus model only)",
                         ("absorber_zeta",), ("field_mt",), (Parameter("zeta_per_tesla", 0.01, -1.0, 1.0),), mrf_loss),
         CandidateEffect("mrf_temperature_drift", "the MRF storage modulus falls with temperature", "MRF rheology (modulus temperature coefficient); seed 004 tests at room temperature",
-                        ("absorber_fn_hz",), ("temperature_c",), (Parameter("modulus_drop_per_mk", 1.0, -50.0, 50.0),), mrf_temperature),
+                        ("absorber_fn_hz",), ("temperature_c",), (Parameter("modulus_drop_per_mk", 1.0, -50.0, 50.0), Parameter("reference_c", 25.0, -20.0, 80.0)), mrf_temperature),
         CandidateEffect("force_level_stiffness", "joint stiffness softens with the force level (nonlinear stiffness)", "robot joint stiffness is load dependent (seed 003 section 2; Dumas et al. 2011)",
                         ("k_n_per_m", "fn_hz"), ("force_n",), (Parameter("softening_per_kn", 0.01, -0.9, 0.9),), force_level),
         CandidateEffect("process_damping", "process damping raises the critical depth at low cutting speed", "Altintas, Eynian, Onozuka 2008; not in the seeds",
