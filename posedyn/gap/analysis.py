@@ -99,6 +99,7 @@ class CandidateEffect:
     depends_on: tuple[str, ...]
     parameters: tuple[Parameter, ...]
     apply: Callable = field(repr=False)
+    combine: Callable | None = field(default=None, repr=False)  # (y, m, {name: theta}): effects that change one model together (the twin)
 
     def touches(self, m: Measurements) -> np.ndarray:
         mask = np.isin(m.quantity, self.quantities)
@@ -270,29 +271,40 @@ class Fit:
     at_bound: tuple[str, ...] = ()  # parameters whose fit sits on a bound of their physical range
 
 
-def predict(effects: tuple[str, ...], theta: np.ndarray, baseline: np.ndarray, m: Measurements) -> np.ndarray:
+def predict(effects: tuple[str, ...], theta: np.ndarray, baseline: np.ndarray, m: Measurements, library: dict | None = None) -> np.ndarray:
+    """The baseline with the named effects applied in order (parameters concatenated in theta)."""
+    library = LIBRARY if library is None else library
     y = baseline.copy()
     i = 0
+    together: dict = {}  # effects that act through one model are applied at once (they do not compose as factors)
     for name in effects:
-        e = LIBRARY[name]
+        e = library[name]
         k = len(e.parameters)
-        y = e.apply(y, m, theta[i : i + k])
+        if e.combine is not None:
+            together.setdefault(e.combine, {})[name] = theta[i : i + k]
+        else:
+            y = e.apply(y, m, theta[i : i + k])
         i += k
+    for combine, thetas in together.items():
+        y = combine(y, m, thetas)
     return y
 
 
-def fit(effects: tuple[str, ...], baseline: np.ndarray, m: Measurements, folds: int = 5, seed: int = 0, noise: Noise = STATED) -> Fit:
-    """The effects' parameters under `noise` (Student-t: a robust fit), the noise model of the
-    residual they leave (`fit_noise`), BIC and a `folds`-fold held-out chi-square per row."""
-    params = [p for name in effects for p in LIBRARY[name].parameters]
+def fit(effects: tuple[str, ...], baseline: np.ndarray, m: Measurements, folds: int = 5, seed: int = 0, noise: Noise = STATED, library: dict | None = None,
+        prior=None) -> Fit:
+    """The effects' parameters under `noise` (Student-t: a robust fit; `prior`: the already chosen
+    effects' parameters as their start), the noise model of the residual they leave (`fit_noise`),
+    BIC and a `folds`-fold held-out chi-square per row."""
+    library = LIBRARY if library is None else library
+    params = [p for name in effects for p in library[name].parameters]
     n = len(m)
     if not params:
         r = (m.value - baseline) / m.std
         z = fit_noise(r)
         chi2 = float(r @ r)
         return Fit((), np.zeros(0), np.zeros(0), chi2, -2 * z.log_likelihood + z.free * math.log(n), chi2 / n, z)
-    theta, cov, active = _least_squares(effects, params, baseline, m, noise=noise)
-    r = (m.value - predict(effects, theta, baseline, m)) / m.std
+    theta, cov, active = _least_squares(effects, params, baseline, m, noise=noise, library=library, prior=prior)
+    r = (m.value - predict(effects, theta, baseline, m, library)) / m.std
     chi2 = float(r @ r)
     z = fit_noise(r)
     # held-out: refit on k-1 folds, score the left-out rows
@@ -300,8 +312,8 @@ def fit(effects: tuple[str, ...], baseline: np.ndarray, m: Measurements, folds: 
     held = 0.0
     for part in np.array_split(order, folds):
         train = np.setdiff1d(order, part)
-        t, _, _ = _least_squares(effects, params, baseline[train], m.take(train), start=theta, noise=noise)
-        rr = (m.value[part] - predict(effects, t, baseline, m)[part]) / m.std[part]
+        t, _, _ = _least_squares(effects, params, baseline[train], m.take(train), start=theta, noise=noise, library=library)
+        rr = (m.value[part] - predict(effects, t, baseline, m, library)[part]) / m.std[part]
         held += float(rr @ rr)
     bic = -2 * z.log_likelihood + (len(params) + z.free) * math.log(n)
     return Fit(tuple(effects), theta, np.sqrt(np.maximum(np.diag(cov), 0.0)), chi2, bic, held / n, z,
@@ -318,21 +330,47 @@ def _t_loss(nu: float):
     return rho
 
 
-def _least_squares(effects, params, baseline, m, start=None, noise: Noise = STATED):
+#: Grid points of a model-level candidate's extra start.
+GRID_STARTS = 17
+
+
+def _least_squares(effects, params, baseline, m, start=None, noise: Noise = STATED, library: dict | None = None, prior=None):
     """(theta, covariance, active bounds) of the effects' parameters: weighted least squares under
     Gaussian noise, the Student-t likelihood under Student-t noise."""
     lo = np.array([p.lower for p in params])
     hi = np.array([p.upper for p in params])
     x0 = np.array([p.start for p in params]) if start is None else np.clip(start, lo, hi)
+    if start is None and prior is not None and len(prior):
+        x0[: len(prior)] = np.clip(prior, lo[: len(prior)], hi[: len(prior)])
     robust = math.isfinite(noise.dof)
     loss = _t_loss(noise.dof) if robust else "linear"
     scale = noise.scale if robust else 1.0
 
     def residual(t):
-        return (m.value - predict(effects, t, baseline, m)) / m.std
+        return (m.value - predict(effects, t, baseline, m, library)) / m.std
 
+    starts = [x0]
+    if start is None:
+        new = slice(len(prior) if prior is not None else 0, len(x0))
+        for factor in (10.0, -1.0):
+            x = x0.copy()
+            x[new] = np.clip(x0[new] * factor, lo[new], hi[new])
+            starts.append(x)
+        if library is not None and library[effects[-1]].combine is not None and new.stop - new.start == 1:
+            # a model-level candidate (its modes recomputed: the landscape has kinks where modes
+            # cross): the best of a grid over its range as one more start
+            grid = np.linspace(lo[new][0], hi[new][0], GRID_STARTS)
+            costs = []
+            for g in grid:
+                x = x0.copy()
+                x[new] = g
+                f = residual(x)
+                costs.append(float(np.sum(_t_loss(noise.dof)(f**2 / scale**2)[0]) if robust else f @ f))
+            x = x0.copy()
+            x[new] = grid[int(np.nanargmin(costs))]
+            starts.append(x)
     best = None
-    for x in (x0, np.clip(x0 * 10.0, lo, hi), np.clip(-x0, lo, hi)) if start is None else (x0,):
+    for x in starts:
         result = least_squares(residual, x, bounds=(lo, hi), x_scale="jac", loss=loss, f_scale=scale)
         if best is None or result.cost < best.cost:
             best = result
@@ -366,6 +404,7 @@ class GapResult:
     correlates: list  # [{"variable", "spearman_rho", "p"}] when unexplained
     prediction_after: np.ndarray
     noise: dict = field(default_factory=dict)  # {"model", "scale", "dof", "verdict"}
+    held_out: dict = field(default_factory=dict)  # {"before", "after"}: chi-square per row on rows held out of the fit (5 folds)
 
     def to_json(self) -> dict:
         return {
@@ -374,6 +413,7 @@ class GapResult:
             "rmse_after": self.rmse_after,
             "noise_std": self.noise_std,
             "noise": self.noise,
+            "held_out_chi2_per_row": self.held_out,
             "explained": self.explained,
             "noise_p_before": self.noise_p_before,
             "noise_p_after": self.noise_p_after,
@@ -401,7 +441,8 @@ def analyse(m: Measurements, baseline: np.ndarray, library: dict[str, CandidateE
     """Forward selection of named effects from the library (see the module docstring)."""
     library = LIBRARY if library is None else library
     n = len(m)
-    current = fit((), baseline, m)
+    current = fit((), baseline, m, library=library)
+    held_before = current.cv_chi2_per_row
     p_before = chi2_p(current.chi2, n)
     chosen: tuple[str, ...] = ()
     table = {}
@@ -416,14 +457,14 @@ def analyse(m: Measurements, baseline: np.ndarray, library: dict[str, CandidateE
         for name in library:
             if name in chosen or not eligible[name]:
                 continue
-            trials[name] = fit(chosen + (name,), baseline, m, noise=current.noise)
+            trials[name] = fit(chosen + (name,), baseline, m, noise=current.noise, library=library, prior=current.theta)
             table[name]["delta_bic"] = round(trials[name].bic - current.bic, 3)
             table[name]["cv_chi2_per_row"] = round(trials[name].cv_chi2_per_row, 4)
             if trials[name].at_bound:
                 table[name]["reason"] = f"fit on the bound of {', '.join(trials[name].at_bound)} (outside its physical range)"
         passing = [k for k in sorted(trials, key=lambda k: trials[k].bic) if current.bic - trials[k].bic >= MIN_BIC_DROP]
         for k in list(passing):
-            if not within_structure(library[k], trials[k], current, baseline, m, [library[c] for c in chosen]):
+            if not within_structure(trials[k], current, baseline, m, [library[c] for c in chosen], library):
                 table[k]["reason"] = "its signal goes with the residual's structure over poses or the named effects' conditions, not within them"
                 passing.remove(k)
         if not passing or trials[passing[0]].at_bound:  # the strongest signal lies outside the library's physics: claim no surrogate
@@ -436,7 +477,7 @@ def analyse(m: Measurements, baseline: np.ndarray, library: dict[str, CandidateE
         chosen = trials[best].effects
         current = trials[best]
         table[best]["chosen"] = True
-    prediction = predict(current.effects, current.theta, baseline, m) if chosen else baseline.copy()
+    prediction = predict(current.effects, current.theta, baseline, m, library) if chosen else baseline.copy()
     effects = []
     i = 0
     for name in chosen:
@@ -473,6 +514,7 @@ def analyse(m: Measurements, baseline: np.ndarray, library: dict[str, CandidateE
         correlates=correlates,
         prediction_after=prediction,
         noise=dict(noise.to_json(), verdict=noise_verdict(noise)),
+        held_out={"before": held_before, "after": current.cv_chi2_per_row},
     )
 
 
@@ -500,7 +542,7 @@ def _demean(x: np.ndarray, groups: list[np.ndarray], w: np.ndarray, sweeps: int 
     return x
 
 
-def within_structure(effect: CandidateEffect, trial: Fit, current: Fit, baseline: np.ndarray, m: Measurements, chosen: list) -> bool:
+def within_structure(trial: Fit, current: Fit, baseline: np.ndarray, m: Measurements, chosen: list, library: dict | None = None) -> bool:
     """Whether a candidate's signal survives the residual's own structure: the residual r and the
     candidate's signature e (its fitted contribution, in stds) are taken within groups of the
     rows that share the named effects' condition levels (a wrong functional form of a named effect
@@ -509,8 +551,8 @@ def within_structure(effect: CandidateEffect, trial: Fit, current: Fit, baseline
     must still pass the BIC criterion, z^2 >= ln n + MIN_BIC_DROP (t-weights under Student-t
     noise). A random condition that happens to be unbalanced across poses or force levels is
     then not named for structure it does not explain."""
-    before = predict(current.effects, current.theta, baseline, m) if current.effects else baseline
-    after = predict(trial.effects, trial.theta, baseline, m)
+    before = predict(current.effects, current.theta, baseline, m, library) if current.effects else baseline
+    after = predict(trial.effects, trial.theta, baseline, m, library)
     r = (m.value - before) / m.std
     e = (after - before) / m.std
     noise = current.noise

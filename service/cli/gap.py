@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import Optional
 
@@ -15,6 +16,7 @@ from posedyn.io.atomic import write_text_atomic
 from posedyn.io.json_values import json_ready
 from posedyn.io.measurements import format_measurements, read_measurements
 from posedyn.io.shipped import SHIPPED_TWIN
+from posedyn.io.twin_file import read_twin, write_twin
 from service.cli.common import console, resolve_cut
 from service.gap.baseline import Baseline, generate_measurements
 from service.gap.report import render
@@ -38,9 +40,10 @@ def gap(
         cut = resolve_cut(cut, model)  # the model's cut; without one, only critical_depth_mm rows need --cut
     baseline = Baseline(twin_file=None if model else twin_file, model_dir=model, cut_file=cut, absorber_file=absorber)
     y, m = baseline.predict(m)
-    result = analyse(m, y)
+    result = analyse(m, y, library=baseline.library())
     doc = json_ready(result.to_json())
     out.mkdir(parents=True, exist_ok=True)
+    doc["updated_model"] = _write_updated_twin(out, result, None if model else twin_file, measured)
     write_text_atomic(out / "gap.json", json.dumps(doc, indent=2, allow_nan=False) + "\n")
     write_text_atomic(out / "report.html", render(m, y, result, f"Simulation vs measurement: {measured.name}"))
     if as_json:
@@ -55,7 +58,25 @@ def gap(
         console.print(f"undecided between {' and '.join(a['candidates'])}: {a['separating_measurement']}")
     if not result.explained:
         console.print("no named effect explains the rest; the residual depends on: " + (", ".join(f"{c['variable']} ({c['quantity']})" for c in doc["residual_correlates"]) or "nothing measured"))
+    if doc["updated_model"]:
+        console.print(f"updated twin (the named effects added): {doc['updated_model']}")
     console.print(f"report: {out / 'report.html'}")
+
+
+def _write_updated_twin(out: Path, result, twin_file: Optional[Path], measured: Path) -> Optional[str]:
+    """DIR/twin.toml: the baseline twin with the named effects that act through it (a device on
+    the flange: its fitted mass added), for `posedyn sweep --twin`, `plan --twin`, `twin modes
+    --twin`; None when no such effect was named or the baseline is a trained model."""
+    named = {e["name"]: e for e in result.effects}
+    if twin_file is None or "flange_device" not in named:
+        return None
+    spec = read_twin(twin_file)
+    mass, std = named["flange_device"]["parameters"]["mass_kg"], named["flange_device"]["parameter_std"]["mass_kg"]
+    params = replace(spec.params, flange_mass_kg=spec.params.flange_mass_kg + mass)
+    path = out / "twin.toml"
+    write_twin(path, replace(spec, params=params), source=f"{twin_file.name} with the gap workflow's named effects from {measured.name}",
+               comment=f"posedyn gap on {measured}: flange_device named, mass_kg = {mass:.4g} +- {std:.2g} (the device as mounted in the campaign's device = 1 rows)")
+    return str(path)
 
 
 def gap_campaign(

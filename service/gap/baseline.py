@@ -19,6 +19,7 @@ from absorber.files import read_absorber
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.errors import InputError
 from posedyn.gap import LIBRARY, Measurements, predict
+from posedyn.gap.twin_candidates import MODEL_JOINT_COLUMNS, twin_candidates
 from posedyn.io.cut import read_cut
 from posedyn.io.model_dir import load_model
 from posedyn.io.twin_file import load_twin
@@ -44,6 +45,38 @@ class Baseline:
             self.robot, self.params = load_twin(twin_file)
         self.cut = read_cut(cut_file)[0] if cut_file is not None else None
         self.absorber = read_absorber(absorber_file)
+
+    def twin(self):
+        """(Robot, TwinParameters) behind the predictions, or None (a model without a twin)."""
+        if self.model is None:
+            return self.robot, self.params
+        return self.model.twin
+
+    def library(self) -> dict:
+        """The candidates for this baseline: the library, and where a twin is behind the
+        predictions the candidates that act through it (`posedyn.gap.twin_candidates`), which then
+        replace the surrogate `device_mass` (the twin's flange mass moves fn and k together)."""
+        twin = self.twin()
+        if twin is None:
+            return dict(LIBRARY)
+        out = {k: v for k, v in LIBRARY.items() if k != "device_mass"}
+        out.update(twin_candidates(*twin))
+        return out
+
+    def joint_angles(self, m: Measurements) -> dict:
+        """{pose_id: joint angles (rad)} of the campaign's poses, by the twin's inverse kinematics
+        (as `pose_rows` computes the twin's modes)."""
+        twin = self.twin()
+        if twin is None:
+            return {}
+        robot = twin[0]
+        first = {}
+        for i, p in enumerate(m.pose_id):
+            first.setdefault(p, i)
+        ids = list(first)
+        poses = campaign_poses(m, [first[p] for p in ids])
+        data = robot.model.createData()
+        return {p: robot.inverse(tool_pose(poses, k), data) for k, p in enumerate(ids)}
 
     def pose_rows(self, m: Measurements) -> dict:
         """{pose_id: {(direction, mode): (fn, zeta, k)}} for every pose of the campaign."""
@@ -108,6 +141,10 @@ class Baseline:
             results = critical_points(structures, self.cut, m.column("rpm")[depth_rows], frequencies=False)
             y[depth_rows] = [r.depth_m * 1e3 for r in results]
         conditions = dict(m.conditions, model_k_n_per_m=model_k, model_k_x_n_per_m=kx, model_k_y_n_per_m=ky)
+        joints = self.joint_angles(m)
+        if joints:
+            q = np.array([joints[p] for p in m.pose_id])
+            conditions.update({c: q[:, j] for j, c in enumerate(MODEL_JOINT_COLUMNS)})
         return y, replace(m, conditions=conditions)
 
 
