@@ -42,7 +42,10 @@ SEEDS_PER_MODE of every mode band, each starting on the eigenvector that lives o
 (following "the eigenvalue nearest 1" instead jumps to robot-mode multipliers, which sit near
 the unit circle at low delay; that was the prototype's 1000 rpm miss). Once picked, the
 eigenvalue is followed by inverse iteration from the predicted one (a full eigen-decomposition
-only where that does not settle on the same eigenvector).
+only where that does not settle on the same eigenvector). The zeroth order never gives
+period-doubling branches (theta = pi); `flip_seeds` adds them: at nu = -1, c = 2 a is real, M(2 a)
+is real, and a flip crossing is where one of its real eigenvalues passes -1, found on a scan of
+FLIP_POINTS depths (one real batch per structure).
 
 Cost. The seed search runs on band projections (`ProjectedCharacteristic`, `mode_bands`): the
 free structure's eigen-pairs are grouped where their frequencies are separated by more than
@@ -62,9 +65,9 @@ step resolved (< pi/4 in phase, < x4 in modulus) means no boundary point lies be
 reported depth, up to the resolution of the phase sampling (a zero pair closer to the circle
 than the sampling can see is not excluded) and the coarse level's W(t) error. A non-zero count
 triggers `_repair`: Newton from the thetas where an eigenvalue of M comes nearest 1 / nu at that
-depth (`_descend`; the seeds never give period-doubling branches, theta = pi, and those are the
-usual misses), else bisection in depth on the count, then Newton from the nearest multipliers;
-the result says `repaired=True`.
+depth (`_descend`; before the flip seeds, period-doubling branches were the usual misses), else
+bisection in depth on the count, then Newton from the nearest multipliers; the result says
+`repaired=True`.
 
 The critical depth is the smallest converged boundary point. Its resolution is chosen, not
 given: the boundary point is found with `SUBSTEPS_PER_RAD` sub-steps per radian of cutting,
