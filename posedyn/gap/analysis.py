@@ -32,7 +32,7 @@ that separates them.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -307,7 +307,19 @@ def fit(effects: tuple[str, ...], baseline: np.ndarray, m: Measurements, folds: 
     r = (m.value - predict(effects, theta, baseline, m, library)) / m.std
     chi2 = float(r @ r)
     z = fit_noise(r)
-    # held-out: refit on k-1 folds, score the left-out rows
+    bic = -2 * z.log_likelihood + (len(params) + z.free) * math.log(n)
+    held = held_out_chi2(effects, theta, baseline, m, folds, seed, noise, library) if folds else math.nan
+    return Fit(tuple(effects), theta, np.sqrt(np.maximum(np.diag(cov), 0.0)), chi2, bic, held, z,
+               tuple(p.name for p, a in zip(params, active) if a))
+
+
+def held_out_chi2(effects: tuple[str, ...], theta: np.ndarray, baseline: np.ndarray, m: Measurements, folds: int = 5, seed: int = 0,
+                  noise: Noise = STATED, library: dict | None = None) -> float:
+    """Chi-square per row on rows held out of the fit: refit on k-1 folds (from theta), score the
+    left-out rows."""
+    library = LIBRARY if library is None else library
+    params = [p for name in effects for p in library[name].parameters]
+    n = len(m)
     order = np.random.default_rng(seed).permutation(n)
     held = 0.0
     for part in np.array_split(order, folds):
@@ -315,9 +327,7 @@ def fit(effects: tuple[str, ...], baseline: np.ndarray, m: Measurements, folds: 
         t, _, _ = _least_squares(effects, params, baseline[train], m.take(train), start=theta, noise=noise, library=library)
         rr = (m.value[part] - predict(effects, t, baseline, m, library)[part]) / m.std[part]
         held += float(rr @ rr)
-    bic = -2 * z.log_likelihood + (len(params) + z.free) * math.log(n)
-    return Fit(tuple(effects), theta, np.sqrt(np.maximum(np.diag(cov), 0.0)), chi2, bic, held / n, z,
-               tuple(p.name for p, a in zip(params, active) if a))
+    return held / n
 
 
 def _t_loss(nu: float):
@@ -457,12 +467,14 @@ def analyse(m: Measurements, baseline: np.ndarray, library: dict[str, CandidateE
         for name in library:
             if name in chosen or not eligible[name]:
                 continue
-            trials[name] = fit(chosen + (name,), baseline, m, noise=current.noise, library=library, prior=current.theta)
+            trials[name] = fit(chosen + (name,), baseline, m, folds=0, noise=current.noise, library=library, prior=current.theta)
             table[name]["delta_bic"] = round(trials[name].bic - current.bic, 3)
-            table[name]["cv_chi2_per_row"] = round(trials[name].cv_chi2_per_row, 4)
             if trials[name].at_bound:
                 table[name]["reason"] = f"fit on the bound of {', '.join(trials[name].at_bound)} (outside its physical range)"
         passing = [k for k in sorted(trials, key=lambda k: trials[k].bic) if current.bic - trials[k].bic >= MIN_BIC_DROP]
+        for k in passing:  # held-out score of the candidates that could be named (the others' would only cost)
+            trials[k] = replace(trials[k], cv_chi2_per_row=held_out_chi2(trials[k].effects, trials[k].theta, baseline, m, noise=current.noise, library=library))
+            table[k]["cv_chi2_per_row"] = round(trials[k].cv_chi2_per_row, 4)
         for k in list(passing):
             if not within_structure(trials[k], current, baseline, m, [library[c] for c in chosen], library):
                 table[k]["reason"] = "its signal goes with the residual's structure over poses or the named effects' conditions, not within them"
