@@ -48,6 +48,9 @@ TIE_BIC = 6.0
 NOISE_P = 0.01
 #: Two conditions vary together in a design when their correlation over the rows is at least this.
 CONFOUNDED = 0.95
+#: A residual whose fitted noise scale is above this many stated stds is not called noise, however
+#: unstructured it looks (a stated std is not that far off; a cause outside the library is likelier).
+PLAUSIBLE_NOISE_SCALE = 3.0
 #: Student-t degrees of freedom searched (below 1.5 the variance does not exist: not a noise model).
 DOF_RANGE = (1.5, 200.0)
 
@@ -510,8 +513,8 @@ def analyse(m: Measurements, baseline: np.ndarray, library: dict[str, CandidateE
     noise = current.noise
     if noise.model == "stated":
         explained = p_after >= NOISE_P
-    else:  # noise other than stated: explained when nothing structured is left in the residual
-        explained = not residual_correlates(m, after, level=NOISE_P / max(_tests(m), 1))
+    else:  # noise other than stated: explained when nothing structured is left and the scale is one a stated std can be off by
+        explained = noise.scale <= PLAUSIBLE_NOISE_SCALE and not residual_correlates(m, after, level=NOISE_P / max(_tests(m), 1))
     correlates = [] if explained else residual_correlates(m, after)
     return GapResult(
         effects=effects,
