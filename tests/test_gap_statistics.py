@@ -152,10 +152,11 @@ def test_fit_noise_recovers_the_scale_and_the_tails(dof):
     assert fit_noise(np.random.default_rng(8).standard_normal(300)).model == "stated"
 
 
-def flange_campaign(seed: int, mass_kg: float = 7.0):
-    """fn and k rows of a twin campaign in which the real cell had a device of `mass_kg` on the
-    flange in the `device` = 1 rows (the twin's own physics: its modes recomputed with the mass,
-    so fn and the modal stiffness both change), stated noise; with the baseline (nominal twin)."""
+def twin_campaign(seed: int, mass_kg: float = 0.0, joint_scale=(1.0,) * 6):
+    """fn and k rows of a twin campaign in which the real cell differs from the twin: a device of
+    `mass_kg` on the flange in the `device` = 1 rows and/or joint stiffnesses scaled by
+    `joint_scale` (the twin's own physics: its modes recomputed, so fn and the modal stiffness
+    both change, differently per pose), stated noise; with the baseline (the nominal twin)."""
     from dataclasses import replace
 
     from service.gap.baseline import Baseline, campaign_design
@@ -163,15 +164,36 @@ def flange_campaign(seed: int, mass_kg: float = 7.0):
     root = Path(__file__).resolve().parents[1]
     nominal = Baseline(twin_file=root / "datasets/robots/kr_r2700_twin.toml")
     real = Baseline(twin_file=root / "datasets/robots/kr_r2700_twin.toml")
-    real.params = replace(real.params, flange_mass_kg=mass_kg)
+    real.params = real.params.scaled(joint_scale)
     design = campaign_design(seed)
     design = design.take(np.flatnonzero(np.isin(design.quantity, ("fn_hz", "k_n_per_m"))))
     y, m = nominal.predict(design)
-    with_device, _ = real.predict(design)
-    truth = np.where(m.conditions["device"] > 0.5, with_device, y)
+    truth, _ = real.predict(design)
+    if mass_kg:
+        real.params = replace(real.params, flange_mass_kg=mass_kg)
+        with_device, _ = real.predict(design)
+        truth = np.where(m.conditions["device"] > 0.5, with_device, truth)
     std = np.where(m.quantity == "fn_hz", FN_STD, K_STD) * np.abs(truth)
     m = replace(m, value=truth + np.random.default_rng(seed).standard_normal(len(y)) * std, std=std)
     return nominal, m, y
+
+
+def flange_campaign(seed: int, mass_kg: float = 7.0):
+    return twin_campaign(seed, mass_kg=mass_kg)
+
+
+def test_the_real_robots_joint_stiffness_is_found_through_the_twin():
+    """The most common twin error: the real robot's axis 2 is 30 % softer and axis 3 25 % stiffer.
+    The pose-following candidates (a joint's stiffness in the twin, the modes recomputed at every
+    pose) are selected on the fn rows first (continuous in the stiffness; the modal stiffness of a
+    mode numbered by frequency rank jumps where modes cross) and kept because they explain every
+    row: both axes named, within 2 %, the residual at the stated noise."""
+    for seed in range(2):
+        nominal, m, y = twin_campaign(seed, joint_scale=(1.0, 0.7, 1.25, 1.0, 1.0, 1.0))
+        r = analyse(m, y, library=nominal.library())
+        factors = {e["name"]: 2.0 ** e["parameters"]["log2_factor"] for e in r.effects}
+        assert sorted(factors) == ["joint_stiffness_a2", "joint_stiffness_a3"] and r.explained and r.rmse_after <= 1.5
+        assert factors["joint_stiffness_a2"] == pytest.approx(0.7, rel=0.02) and factors["joint_stiffness_a3"] == pytest.approx(1.25, rel=0.02)
 
 
 def test_a_device_on_the_flange_is_named_through_the_twin():
@@ -182,18 +204,19 @@ def test_a_device_on_the_flange_is_named_through_the_twin():
     from posedyn.gap import LIBRARY
 
     right, surrogate_fails = 0, 0
-    for seed in range(6):
+    for seed in range(3):
         nominal, m, y = flange_campaign(seed)
         r = analyse(m, y, library=nominal.library())
         right += named(r) == ["flange_device"] and abs(r.effects[0]["parameters"]["mass_kg"] - 7.0) <= 0.7 and r.rmse_after <= 1.5 and r.explained
         surrogate_fails += analyse(m, y, library=LIBRARY).rmse_after > 2.0
-    assert right == 6 and surrogate_fails >= 5
+    assert right == 3 and surrogate_fails >= 2
 
 
-def test_gap_cli_writes_the_twin_with_the_named_device(tmp_path):
-    """`posedyn gap --twin --out DIR`: the flange device named, DIR/twin.toml is the twin with the
-    fitted mass on its flange (provenance in its comment), and its modes at a pose are those of the
-    nominal twin with exactly that mass; the gap on rows held out of the fit shrinks."""
+def test_gap_cli_writes_the_twin_with_the_named_effects(tmp_path):
+    """`posedyn gap --twin --out DIR` on a cell whose axes 2 and 3 differ from the twin and which
+    carries a 7 kg device in the device = 1 rows: all three named, DIR/twin.toml is the twin with
+    the fitted joint factors and flange mass (provenance in its comment), and its modes at a pose
+    are those of the nominal twin changed by exactly those; the gap on held-out rows shrinks."""
     import json
     import subprocess
     import sys
@@ -204,20 +227,25 @@ def test_gap_cli_writes_the_twin_with_the_named_device(tmp_path):
     from posedyn.robot import GridPose, pose_modes, tool_pose
     from service.gap.baseline import campaign_poses
 
-    nominal, m, y = flange_campaign(3)
+    nominal, m, y = twin_campaign(3, mass_kg=7.0, joint_scale=(1.0, 0.7, 1.25, 1.0, 1.0, 1.0))
     measured = tmp_path / "meas.csv"
     measured.write_text(format_measurements(m, [c for c in m.conditions if not c.startswith("model_")]))
     done = subprocess.run([sys.executable, "-m", "service", "gap", "--measured", str(measured), "--twin", "--out", str(tmp_path / "gap"), "--json"],
-                          capture_output=True, text=True, timeout=300)
+                          capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     doc = json.loads(done.stdout)
-    assert [e["name"] for e in doc["effects"]] == ["flange_device"] and doc["explained"]
-    assert doc["held_out_chi2_per_row"]["after"] < 0.1 * doc["held_out_chi2_per_row"]["before"]
-    mass = doc["effects"][0]["parameters"]["mass_kg"]
-    assert doc["updated_model"] == str(tmp_path / "gap/twin.toml") and "flange_device named" in (tmp_path / "gap/twin.toml").read_text()
+    fitted = {e["name"]: list(e["parameters"].values())[0] for e in doc["effects"]}
+    assert sorted(fitted) == ["flange_device", "joint_stiffness_a2", "joint_stiffness_a3"] and doc["explained"]
+    assert fitted["flange_device"] == pytest.approx(7.0, rel=0.1) and 2 ** fitted["joint_stiffness_a2"] == pytest.approx(0.7, rel=0.02)
+    assert doc["held_out_chi2_per_row"]["after"] < 0.01 * doc["held_out_chi2_per_row"]["before"]
+    text = (tmp_path / "gap/twin.toml").read_text()
+    assert doc["updated_model"] == str(tmp_path / "gap/twin.toml") and "flange_device: mass_kg" in text and "joint_stiffness_a3: stiffness x" in text
     robot, updated = load_twin(tmp_path / "gap/twin.toml")
-    assert updated.flange_mass_kg == pytest.approx(mass, rel=1e-12)
+    scale = [1.0, 2 ** fitted["joint_stiffness_a2"], 2 ** fitted["joint_stiffness_a3"], 1.0, 1.0, 1.0]
+    want_params = replace(nominal.params.scaled(scale), flange_mass_kg=fitted["flange_device"])
+    assert updated.flange_mass_kg == pytest.approx(fitted["flange_device"], rel=1e-12)
+    assert np.allclose(updated.joint_stiffness_nm_per_rad, want_params.joint_stiffness_nm_per_rad, rtol=1e-12)
     pose = GridPose("p0", tool_pose(campaign_poses(m, [0]), 0))
     _, got = pose_modes(robot, pose, updated)
-    _, want = pose_modes(*nominal.twin()[:1], pose, replace(nominal.params, flange_mass_kg=mass))
-    assert np.allclose(got.fn_hz, want.fn_hz, rtol=1e-12) and np.allclose(got.tip_shapes, want.tip_shapes, rtol=1e-9)
+    _, want = pose_modes(nominal.twin()[0], pose, want_params)
+    assert np.allclose(got.fn_hz, want.fn_hz, rtol=1e-12) and np.allclose(np.abs(got.tip_shapes), np.abs(want.tip_shapes), rtol=1e-9)

@@ -103,6 +103,7 @@ class CandidateEffect:
     parameters: tuple[Parameter, ...]
     apply: Callable = field(repr=False)
     combine: Callable | None = field(default=None, repr=False)  # (y, m, {name: theta}): effects that change one model together (the twin)
+    fit_quantities: tuple | None = None  # a pose-following model candidate: selected and fitted first on these rows only (`analyse`)
 
     def touches(self, m: Measurements) -> np.ndarray:
         mask = np.isin(m.quantity, self.quantities)
@@ -465,6 +466,11 @@ def analyse(m: Measurements, baseline: np.ndarray, library: dict[str, CandidateE
         ok, why = e.identifiable(m)
         eligible[name] = ok
         table[name] = {"name": name, "eligible": ok, "reason": why, "delta_bic": None, "cv_chi2_per_row": None, "chosen": False}
+    first = _pose_following_first(m, baseline, library, current, max_effects)
+    if first is not None:
+        chosen, current = first.effects, first
+        for name in chosen:
+            table[name].update(chosen=True, delta_bic=round(first.bic - fit((), baseline, m, library=library).bic, 3))
     while len(chosen) < max_effects and not (current.noise.model == "stated" and chi2_p(current.chi2, n) >= NOISE_P):
         trials = {}
         for name in library:
@@ -492,6 +498,7 @@ def analyse(m: Measurements, baseline: np.ndarray, library: dict[str, CandidateE
         chosen = trials[best].effects
         current = trials[best]
         table[best]["chosen"] = True
+    chosen, current = _drop_unneeded(chosen, current, baseline, m, library, table)
     prediction = predict(current.effects, current.theta, baseline, m, library) if chosen else baseline.copy()
     effects = []
     i = 0
@@ -593,6 +600,47 @@ def within_structure(trial: Fit, current: Fit, baseline: np.ndarray, m: Measurem
     dof = max(len(r) - len(np.unique(np.concatenate([g + 1e6 * i for i, g in enumerate(groups)]))) - 1, 1)
     sigma2 = float(np.sum(w * (r_a - beta * e_a) ** 2)) / dof
     return beta**2 * see / max(sigma2, 1e-300) >= math.log(len(r)) + MIN_BIC_DROP
+
+
+def _drop_unneeded(chosen: tuple, current: Fit, baseline: np.ndarray, m: Measurements, library: dict, table: dict) -> tuple[tuple, Fit]:
+    """Backward elimination: a named effect that the others make unnecessary (removing it raises
+    BIC by less than MIN_BIC_DROP, e.g. a joint picked up for the pose average of a device named
+    later) is dropped, one at a time."""
+    while len(chosen) > 1:
+        for name in chosen:
+            rest = tuple(e for e in chosen if e != name)
+            keep = np.concatenate([np.ones(len(library[e].parameters), bool) * (e != name) for e in chosen])
+            without = fit(rest, baseline, m, folds=0, noise=current.noise, library=library, prior=current.theta[keep])
+            if without.bic - current.bic < MIN_BIC_DROP:
+                table[name].update(chosen=False, reason=f"dropped: not needed once {', '.join(rest)} named (BIC {without.bic - current.bic:+.1f} without it)")
+                chosen = rest
+                current = replace(without, cv_chi2_per_row=held_out_chi2(rest, without.theta, baseline, m, noise=current.noise, library=library))
+                break
+        else:
+            break
+    return chosen, current
+
+
+def _pose_following_first(m: Measurements, baseline: np.ndarray, library: dict, current: Fit, max_effects: int) -> Fit | None:
+    """The pose-following model candidates (`fit_quantities`: a joint's stiffness in the twin)
+    selected first, on their rows alone (fn rows: continuous in the twin's parameters, where the
+    modal stiffness of a mode numbered by frequency rank jumps as modes cross), by the same
+    forward selection; kept, with their parameters refined on every row, when they lower the
+    BIC of the whole campaign by MIN_BIC_DROP. None otherwise."""
+    own = {k: e for k, e in library.items() if e.fit_quantities is not None}
+    if not own:
+        return None
+    quantities = sorted({q for e in own.values() for q in e.fit_quantities})
+    rows = np.flatnonzero(np.isin(m.quantity, quantities))
+    if len(rows) < 6:
+        return None
+    sub = analyse(m.take(rows), baseline[rows], library={k: replace(e, fit_quantities=None) for k, e in own.items()}, max_effects=max_effects)
+    if not sub.effects:
+        return None
+    names = tuple(e["name"] for e in sub.effects)
+    theta = np.array([v for e in sub.effects for v in e["parameters"].values()])
+    whole = fit(names, baseline, m, library=library, prior=theta, noise=current.noise)
+    return whole if current.bic - whole.bic >= MIN_BIC_DROP and not whole.at_bound else None
 
 
 def confounded(a: CandidateEffect, b: CandidateEffect, m: Measurements) -> bool:

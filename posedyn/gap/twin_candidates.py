@@ -31,30 +31,34 @@ MODEL_JOINT_COLUMNS = tuple(f"model_q{j}_rad" for j in range(1, 7))
 
 
 def twin_candidates(robot: Robot, params: TwinParameters) -> dict[str, CandidateEffect]:
-    """`flange_device`: a device's mass on the flange where `device` = 1, at the twin's flange
-    offset (kg, 0-200)."""
+    """`joint_stiffness_a1` .. `a6` (log2 of a joint's stiffness factor, -2..2; pose-following,
+    selected on the fn rows first) and `flange_device` (a device's mass on the flange where
+    `device` = 1, at the twin's flange offset, kg 0-200)."""
     cache: dict = {}
 
-    def table(q: tuple, flange_kg: float) -> dict:
-        key = (q, round(flange_kg, 12))
+    def table(q: tuple, scale: tuple, flange_kg: float) -> dict:
+        key = (q, scale, round(flange_kg, 12))
         if key not in cache:
-            p = replace(params, flange_mass_kg=params.flange_mass_kg + flange_kg) if flange_kg else params
+            p = params.scaled(np.asarray(scale))
+            if flange_kg:
+                p = replace(p, flange_mass_kg=p.flange_mass_kg + flange_kg)
             modes = twin_modes(robot, np.asarray(q), p)
             if len(cache) > 20000:
                 cache.clear()
             cache[key] = {(d, j): row for d in ("x", "y", "z") for j, row in enumerate(direction_rows(modes, d, params.robot_modes_per_direction), 1)}
         return cache[key]
 
-    def ratio(m: Measurements, flange_kg: float) -> np.ndarray:
+    def ratio(m: Measurements, scale, flange_kg: float) -> np.ndarray:
         """changed / nominal twin for every fn_hz and k_n_per_m row (1 elsewhere)."""
         out = np.ones(len(m))
         q_all = np.column_stack([m.column(c) for c in MODEL_JOINT_COLUMNS])
         modal = np.isin(m.quantity, ("fn_hz", "k_n_per_m")) & np.all(np.isfinite(q_all), axis=1)
         flange = np.where(np.isfinite(m.column("device")), m.column("device"), 0.0) * flange_kg
+        scale = tuple(float(v) for v in scale)
         for i in np.flatnonzero(modal):
             q = tuple(np.round(q_all[i], 12))
             key = (str(m.direction[i]), int(m.mode[i]))
-            nominal, changed = table(q, 0.0), table(q, float(flange[i]))
+            nominal, changed = table(q, (1.0,) * 6, 0.0), table(q, scale, float(flange[i]))
             if key in nominal and key in changed:
                 column = 0 if m.quantity[i] == "fn_hz" else 2
                 with np.errstate(all="ignore"):
@@ -64,10 +68,25 @@ def twin_candidates(robot: Robot, params: TwinParameters) -> dict[str, Candidate
 
     def combine(y, m, thetas: dict) -> np.ndarray:
         """Every chosen twin candidate at once: one changed twin, one ratio per row."""
-        return y * ratio(m, float(thetas["flange_device"][0]))
+        scale, flange_kg = np.ones(6), 0.0
+        for name, t in thetas.items():
+            if name == "flange_device":
+                flange_kg = float(t[0])
+            else:
+                scale[int(name[-1]) - 1] = 2.0 ** float(t[0])
+        return y * ratio(m, scale, flange_kg)
 
-    return {"flange_device": CandidateEffect(
+    def joint(j: int) -> CandidateEffect:
+        name = f"joint_stiffness_a{j + 1}"
+        return CandidateEffect(
+            name, f"axis {j + 1}'s joint stiffness differs from the twin's (the modes recomputed at every pose)",
+            "seed 003 section 2 (joint stiffness identification); Dumas et al. 2011", ("fn_hz", "k_n_per_m"), (),
+            (Parameter("log2_factor", 0.1, -2.0, 2.0),), lambda y, m, t: combine(y, m, {name: t}), combine=combine, fit_quantities=("fn_hz",))
+
+    out = {f"joint_stiffness_a{j + 1}": joint(j) for j in range(6)}
+    out["flange_device"] = CandidateEffect(
         "flange_device", "a device mounted on the flange (the twin's modes recomputed with its mass: fn and modal stiffness change)",
         "seed 000 section 2 and Fig. 2 (actuator mass lowers and splits the robot modes)",
         ("fn_hz", "k_n_per_m"), ("device",), (Parameter("mass_kg", 2.0, 0.0, 200.0),), lambda y, m, t: combine(y, m, {"flange_device": t}),
-        combine=combine)}
+        combine=combine)
+    return out

@@ -7,6 +7,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Optional
 
+import numpy as np
 import typer
 from rich.markup import escape
 
@@ -64,18 +65,30 @@ def gap(
 
 
 def _write_updated_twin(out: Path, result, twin_file: Optional[Path], measured: Path) -> Optional[str]:
-    """DIR/twin.toml: the baseline twin with the named effects that act through it (a device on
-    the flange: its fitted mass added), for `posedyn sweep --twin`, `plan --twin`, `twin modes
-    --twin`; None when no such effect was named or the baseline is a trained model."""
-    named = {e["name"]: e for e in result.effects}
-    if twin_file is None or "flange_device" not in named:
+    """DIR/twin.toml: the baseline twin with the named effects that act through it (joint
+    stiffnesses scaled, a device's fitted mass on the flange), for `posedyn sweep --twin`, `plan
+    --twin`, `twin modes --twin`; None when no such effect was named or the baseline is a trained
+    model."""
+    through = [e for e in result.effects if e["name"] == "flange_device" or e["name"].startswith("joint_stiffness_a")]
+    if twin_file is None or not through:
         return None
     spec = read_twin(twin_file)
-    mass, std = named["flange_device"]["parameters"]["mass_kg"], named["flange_device"]["parameter_std"]["mass_kg"]
-    params = replace(spec.params, flange_mass_kg=spec.params.flange_mass_kg + mass)
+    params = spec.params
+    scale = np.ones(6)
+    lines = [f"posedyn gap on {measured}: the twin {twin_file.name} with the named effects"]
+    for e in through:
+        (name, value), = e["parameters"].items()
+        std = e["parameter_std"][name]
+        if e["name"] == "flange_device":
+            params = replace(params, flange_mass_kg=params.flange_mass_kg + value)
+            lines.append(f"flange_device: mass_kg = {value:.4g} +- {std:.2g} (the device as mounted in the campaign's device = 1 rows)")
+        else:
+            axis = int(e["name"][-1])
+            scale[axis - 1] = 2.0**value
+            lines.append(f"{e['name']}: stiffness x {2.0**value:.4g} (log2 {value:.4g} +- {std:.2g})")
+    params = params.scaled(scale)
     path = out / "twin.toml"
-    write_twin(path, replace(spec, params=params), source=f"{twin_file.name} with the gap workflow's named effects from {measured.name}",
-               comment=f"posedyn gap on {measured}: flange_device named, mass_kg = {mass:.4g} +- {std:.2g} (the device as mounted in the campaign's device = 1 rows)")
+    write_twin(path, replace(spec, params=params), source=f"{twin_file.name} with the gap workflow's named effects from {measured.name}", comment="\n".join(lines))
     return str(path)
 
 
