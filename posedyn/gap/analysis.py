@@ -26,7 +26,14 @@ parameters) ln n. So noise larger than stated, or heavier-tailed, is reported as
 instead of being explained by an effect. An effect whose fit sits on a parameter bound (its
 physical range) is not claimed; two effects whose conditions vary together in the design
 (|correlation| >= CONFOUNDED) and both lower BIC are reported as undecided with the measurement
-that separates them.
+that separates them; a candidate whose signal does not survive within the residual's own
+structure is not named (`within_structure`); after the forward selection, an effect the others
+make unnecessary is dropped (`_drop_unneeded`).
+
+Effects through a model. A candidate with `combine` changes a model (the twin: `posedyn.gap.
+twin_candidates`) and all such chosen candidates are applied as one changed model; one with
+`fit_quantities` follows the pose and is selected first on those rows alone
+(`_pose_following_first`).
 """
 
 from __future__ import annotations
