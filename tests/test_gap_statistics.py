@@ -182,20 +182,6 @@ def flange_campaign(seed: int, mass_kg: float = 7.0):
     return twin_campaign(seed, mass_kg=mass_kg)
 
 
-def test_the_real_robots_joint_stiffness_is_found_through_the_twin():
-    """The most common twin error: the real robot's axis 2 is 30 % softer and axis 3 25 % stiffer.
-    The pose-following candidates (a joint's stiffness in the twin, the modes recomputed at every
-    pose) are selected on the fn rows first (continuous in the stiffness; the modal stiffness of a
-    mode numbered by frequency rank jumps where modes cross) and kept because they explain every
-    row: both axes named, within 2 %, the residual at the stated noise."""
-    for seed in range(2):
-        nominal, m, y = twin_campaign(seed, joint_scale=(1.0, 0.7, 1.25, 1.0, 1.0, 1.0))
-        r = analyse(m, y, library=nominal.library())
-        factors = {e["name"]: 2.0 ** e["parameters"]["log2_factor"] for e in r.effects}
-        assert sorted(factors) == ["joint_stiffness_a2", "joint_stiffness_a3"] and r.explained and r.rmse_after <= 1.5
-        assert factors["joint_stiffness_a2"] == pytest.approx(0.7, rel=0.02) and factors["joint_stiffness_a3"] == pytest.approx(1.25, rel=0.02)
-
-
 def test_a_device_on_the_flange_is_named_through_the_twin():
     """A 7 kg device in the twin itself (fn and modal stiffness change together, differently per
     pose): the twin-level candidate `flange_device` is named alone with the mass within 10 % and
@@ -204,19 +190,24 @@ def test_a_device_on_the_flange_is_named_through_the_twin():
     from posedyn.gap import LIBRARY
 
     right, surrogate_fails = 0, 0
-    for seed in range(3):
+    for seed in range(2):
         nominal, m, y = flange_campaign(seed)
         r = analyse(m, y, library=nominal.library())
         right += named(r) == ["flange_device"] and abs(r.effects[0]["parameters"]["mass_kg"] - 7.0) <= 0.7 and r.rmse_after <= 1.5 and r.explained
         surrogate_fails += analyse(m, y, library=LIBRARY).rmse_after > 2.0
-    assert right == 3 and surrogate_fails >= 2
+    assert right == 2 and surrogate_fails == 2
 
 
 def test_gap_cli_writes_the_twin_with_the_named_effects(tmp_path):
-    """`posedyn gap --twin --out DIR` on a cell whose axes 2 and 3 differ from the twin and which
-    carries a 7 kg device in the device = 1 rows: all three named, DIR/twin.toml is the twin with
-    the fitted joint factors and flange mass (provenance in its comment), and its modes at a pose
-    are those of the nominal twin changed by exactly those; the gap on held-out rows shrinks."""
+    """The most common twin error, and a device: the real robot's axis 2 is 30 % softer and axis 3
+    25 % stiffer than the twin, and it carries a 7 kg device in the device = 1 rows. The
+    pose-following candidates (a joint's stiffness in the twin, the modes recomputed at every
+    pose) are selected on the fn rows first (continuous in the stiffness; the modal stiffness of a
+    mode numbered by frequency rank jumps where modes cross), then the device: all three named
+    (joints within 2 %, mass within 10 %), the residual at the stated noise. `posedyn gap --twin
+    --out DIR` writes DIR/twin.toml, the twin with the fitted joint factors and flange mass
+    (provenance in its comment), whose modes at a pose are those of the nominal twin changed by
+    exactly those; the gap on held-out rows shrinks 100-fold."""
     import json
     import subprocess
     import sys
@@ -237,6 +228,7 @@ def test_gap_cli_writes_the_twin_with_the_named_effects(tmp_path):
     fitted = {e["name"]: list(e["parameters"].values())[0] for e in doc["effects"]}
     assert sorted(fitted) == ["flange_device", "joint_stiffness_a2", "joint_stiffness_a3"] and doc["explained"]
     assert fitted["flange_device"] == pytest.approx(7.0, rel=0.1) and 2 ** fitted["joint_stiffness_a2"] == pytest.approx(0.7, rel=0.02)
+    assert 2 ** fitted["joint_stiffness_a3"] == pytest.approx(1.25, rel=0.02) and doc["rmse_after"] <= 1.5
     assert doc["held_out_chi2_per_row"]["after"] < 0.01 * doc["held_out_chi2_per_row"]["before"]
     text = (tmp_path / "gap/twin.toml").read_text()
     assert doc["updated_model"] == str(tmp_path / "gap/twin.toml") and "flange_device: mass_kg" in text and "joint_stiffness_a3: stiffness x" in text

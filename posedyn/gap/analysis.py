@@ -55,8 +55,8 @@ TIE_BIC = 6.0
 NOISE_P = 0.01
 #: Two conditions vary together in a design when their correlation over the rows is at least this.
 CONFOUNDED = 0.95
-#: A residual whose fitted noise scale is above this many stated stds is not called noise, however
-#: unstructured it looks (a stated std is not that far off; a cause outside the library is likelier).
+#: A residual whose fitted noise scale or RMS is above this many stated stds is not called noise,
+#: however unstructured it looks (a stated std is not that far off; a cause outside the library is likelier).
 PLAUSIBLE_NOISE_SCALE = 3.0
 #: Student-t degrees of freedom searched (below 1.5 the variance does not exist: not a noise model).
 DOF_RANGE = (1.5, 200.0)
@@ -473,7 +473,7 @@ def analyse(m: Measurements, baseline: np.ndarray, library: dict[str, CandidateE
         ok, why = e.identifiable(m)
         eligible[name] = ok
         table[name] = {"name": name, "eligible": ok, "reason": why, "delta_bic": None, "cv_chi2_per_row": None, "chosen": False}
-    first = _pose_following_first(m, baseline, library, current, max_effects)
+    first, pose_structure = _pose_following_first(m, baseline, library, current, max_effects)
     if first is not None:
         chosen, current = first.effects, first
         for name in chosen:
@@ -481,8 +481,8 @@ def analyse(m: Measurements, baseline: np.ndarray, library: dict[str, CandidateE
     while len(chosen) < max_effects and not (current.noise.model == "stated" and chi2_p(current.chi2, n) >= NOISE_P):
         trials = {}
         for name in library:
-            if name in chosen or not eligible[name]:
-                continue
+            if name in chosen or not eligible[name] or (library[name].fit_quantities is not None and not pose_structure):
+                continue  # pose-following candidates: tried on every row only where the first pass found pose-following structure
             trials[name] = fit(chosen + (name,), baseline, m, folds=0, noise=current.noise, library=library, prior=current.theta)
             table[name]["delta_bic"] = round(trials[name].bic - current.bic, 3)
             if trials[name].at_bound:
@@ -528,7 +528,8 @@ def analyse(m: Measurements, baseline: np.ndarray, library: dict[str, CandidateE
     if noise.model == "stated":
         explained = p_after >= NOISE_P
     else:  # noise other than stated: explained when nothing structured is left and the scale is one a stated std can be off by
-        explained = noise.scale <= PLAUSIBLE_NOISE_SCALE and not residual_correlates(m, after, level=NOISE_P / max(_tests(m), 1))
+        rms = float(np.sqrt(np.mean(after**2)))
+        explained = max(noise.scale, rms) <= PLAUSIBLE_NOISE_SCALE and not residual_correlates(m, after, level=NOISE_P / max(_tests(m), 1))
     correlates = [] if explained else residual_correlates(m, after)
     return GapResult(
         effects=effects,
@@ -628,26 +629,27 @@ def _drop_unneeded(chosen: tuple, current: Fit, baseline: np.ndarray, m: Measure
     return chosen, current
 
 
-def _pose_following_first(m: Measurements, baseline: np.ndarray, library: dict, current: Fit, max_effects: int) -> Fit | None:
+def _pose_following_first(m: Measurements, baseline: np.ndarray, library: dict, current: Fit, max_effects: int) -> tuple[Fit | None, bool]:
     """The pose-following model candidates (`fit_quantities`: a joint's stiffness in the twin)
     selected first, on their rows alone (fn rows: continuous in the twin's parameters, where the
     modal stiffness of a mode numbered by frequency rank jumps as modes cross), by the same
     forward selection; kept, with their parameters refined on every row, when they lower the
-    BIC of the whole campaign by MIN_BIC_DROP. None otherwise."""
+    BIC of the whole campaign by MIN_BIC_DROP (else None); and whether those rows showed any
+    pose-following structure at all (then the candidates are tried on every row as well)."""
     own = {k: e for k, e in library.items() if e.fit_quantities is not None}
     if not own:
-        return None
+        return None, False
     quantities = sorted({q for e in own.values() for q in e.fit_quantities})
     rows = np.flatnonzero(np.isin(m.quantity, quantities))
     if len(rows) < 6:
-        return None
+        return None, False
     sub = analyse(m.take(rows), baseline[rows], library={k: replace(e, fit_quantities=None) for k, e in own.items()}, max_effects=max_effects)
     if not sub.effects:
-        return None
+        return None, False
     names = tuple(e["name"] for e in sub.effects)
     theta = np.array([v for e in sub.effects for v in e["parameters"].values()])
     whole = fit(names, baseline, m, library=library, prior=theta, noise=current.noise)
-    return whole if current.bic - whole.bic >= MIN_BIC_DROP and not whole.at_bound else None
+    return (whole if current.bic - whole.bic >= MIN_BIC_DROP and not whole.at_bound else None), True
 
 
 def confounded(a: CandidateEffect, b: CandidateEffect, m: Measurements) -> bool:
