@@ -27,7 +27,7 @@ COLUMNS = ("time_s", "pose_id", "target_hz", "voltage_v", "current_a", "field_mt
 
 
 def plan(
-    model_dir: Optional[Path] = typer.Argument(None, help="Model directory (or give --modes)."),
+    model_dir: Optional[Path] = typer.Argument(None, help="Model directory (or give --modes or --twin)."),
     modes: Optional[Path] = typer.Option(None, "--modes", help="Modal table with the path's poses instead of a model."),
     twin: Optional[Path] = typer.Option(None, "--twin", help="Robot twin file: its modes at the path's poses (3-D mode shapes) instead of a model."),
     path: Path = typer.Option(..., "--path", help="Timed tool path: the pose columns and time_s (s, increasing), one row per point."),
