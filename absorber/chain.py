@@ -418,9 +418,8 @@ VERIFY_AGREEMENT = REL_TOL
 
 def _needs_verification(structures: list[ToolTipDynamics], verified: list[StabilityResult], config: ScheduleConfig) -> np.ndarray:
     """Per structure: whether its samples need the verified engine. Without the verification the
-    engine finds the boundary from its seeds only, and seeds never start on a flip
-    (period-doubling) lobe; where the nominal structure's verified answer came from beyond the
-    seeds, its samples' will too."""
+    engine finds the boundary from its seeds only, which can miss the lowest lobe; where the
+    nominal structure's verified answer came from beyond the seeds, its samples' will too."""
     if config.steps is not None or not structures:
         return np.zeros(len(structures), bool)
     quick = critical_points(structures, config.cut, config.rpm, frequencies=False, verify=False)

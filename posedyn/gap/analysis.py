@@ -475,9 +475,9 @@ def analyse(m: Measurements, baseline: np.ndarray, library: dict[str, CandidateE
         table[name] = {"name": name, "eligible": ok, "reason": why, "delta_bic": None, "cv_chi2_per_row": None, "chosen": False}
     first, pose_structure = _pose_following_first(m, baseline, library, current, max_effects)
     if first is not None:
+        for name in first.effects:
+            table[name].update(chosen=True, delta_bic=round(first.bic - current.bic, 3))
         chosen, current = first.effects, first
-        for name in chosen:
-            table[name].update(chosen=True, delta_bic=round(first.bic - fit((), baseline, m, library=library).bic, 3))
     while len(chosen) < max_effects and not (current.noise.model == "stated" and chi2_p(current.chi2, n) >= NOISE_P):
         trials = {}
         for name in library:

@@ -28,6 +28,25 @@ from posedyn.robot import Robot, TwinParameters, direction_rows
 from posedyn.robot.twin import twin_modes
 
 MODEL_JOINT_COLUMNS = tuple(f"model_q{j}_rad" for j in range(1, 7))
+#: The candidates that act through the twin.
+TWIN_EFFECTS = tuple(f"joint_stiffness_a{j}" for j in range(1, 7)) + ("flange_device",)
+
+
+def twin_changes(values: dict) -> tuple[np.ndarray, float]:
+    """(joint stiffness factors (6,), flange mass kg) of named twin candidates {name: parameter}."""
+    scale, flange_kg = np.ones(6), 0.0
+    for name, value in values.items():
+        if name == "flange_device":
+            flange_kg = float(value)
+        else:
+            scale[int(name.removeprefix("joint_stiffness_a")) - 1] = 2.0 ** float(value)
+    return scale, flange_kg
+
+
+def updated_twin(params: TwinParameters, values: dict) -> TwinParameters:
+    """The twin with named twin candidates applied (the flange mass as mounted in the device rows)."""
+    scale, flange_kg = twin_changes(values)
+    return replace(params.scaled(scale), flange_mass_kg=params.flange_mass_kg + flange_kg)
 
 
 def twin_candidates(robot: Robot, params: TwinParameters) -> dict[str, CandidateEffect]:
@@ -68,13 +87,7 @@ def twin_candidates(robot: Robot, params: TwinParameters) -> dict[str, Candidate
 
     def combine(y, m, thetas: dict) -> np.ndarray:
         """Every chosen twin candidate at once: one changed twin, one ratio per row."""
-        scale, flange_kg = np.ones(6), 0.0
-        for name, t in thetas.items():
-            if name == "flange_device":
-                flange_kg = float(t[0])
-            else:
-                scale[int(name[-1]) - 1] = 2.0 ** float(t[0])
-        return y * ratio(m, scale, flange_kg)
+        return y * ratio(m, *twin_changes({name: float(t[0]) for name, t in thetas.items()}))
 
     def joint(j: int) -> CandidateEffect:
         name = f"joint_stiffness_a{j + 1}"

@@ -96,8 +96,6 @@ def _converged_or_flagged(point, frequencies: bool) -> StabilityResult:
     if point is None:
         return StabilityResult(math.nan, math.nan, "floquet", False, math.inf)  # unknown, not "never chatters"
     converged = bool(point.converged) and point.verified is not False  # a failed check is not a converged answer
-    if math.isinf(point.depth_m) and not converged:  # no boundary point found is not a proof that none exists
-        return StabilityResult(math.nan, math.nan, "floquet", False, math.inf)
     return StabilityResult(point.depth_m, point.chatter_hz if frequencies else math.nan, "floquet", converged, float(point.rel_error_estimate), family=tuple(point.family))
 
 

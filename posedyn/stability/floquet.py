@@ -139,7 +139,8 @@ POINTS_PER_TOOTH_FREQUENCY = 10
 
 @dataclass(frozen=True, eq=False)
 class CriticalPoint:
-    """Critical depth (m, inf when no boundary point was found), dominant chatter frequency (Hz),
+    """Critical depth (m; inf where no cutting force reaches the structure, NaN where no boundary
+    point was found otherwise: unknown, not "never chatters"), dominant chatter frequency (Hz),
     theta = angle of the critical multiplier (rad, in [0, pi]; pi: flip), the chatter-frequency
     family ((hz, relative amplitude), largest first), the resolution used (sub-steps per radian),
     the relative error estimate and whether it is within rel_tol."""
@@ -1182,7 +1183,7 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
         r = float(rpm[e])
         if not len(mine):  # no boundary point found: proven absent only where no cutting force reaches the structure
             inert = not np.any(char(s, 0, True).W)
-            points.append(CriticalPoint(r, np.inf, np.nan, np.nan, (), base, 0.0 if inert else np.nan, inert, True if inert else verified[j], ()))
+            points.append(CriticalPoint(r, np.inf if inert else np.nan, np.nan, np.nan, (), base, 0.0 if inert else np.inf, inert, True if inert else verified[j], ()))
             continue
         lv = level_job[j]
         branches = []

@@ -7,12 +7,12 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Optional
 
-import numpy as np
 import typer
 from rich.markup import escape
 
 from posedyn.errors import InputError
 from posedyn.gap import LIBRARY, analyse
+from posedyn.gap.twin_candidates import TWIN_EFFECTS, updated_twin
 from posedyn.io.atomic import write_text_atomic
 from posedyn.io.json_values import json_ready
 from posedyn.io.measurements import format_measurements, read_measurements
@@ -69,26 +69,20 @@ def _write_updated_twin(out: Path, result, twin_file: Optional[Path], measured: 
     stiffnesses scaled, a device's fitted mass on the flange), for `posedyn sweep --twin`, `plan
     --twin`, `twin modes --twin`; None when no such effect was named or the baseline is a trained
     model."""
-    through = [e for e in result.effects if e["name"] == "flange_device" or e["name"].startswith("joint_stiffness_a")]
+    through = {e["name"]: e for e in result.effects if e["name"] in TWIN_EFFECTS}
     if twin_file is None or not through:
         return None
     spec = read_twin(twin_file)
-    params = spec.params
-    scale = np.ones(6)
+    values = {name: next(iter(e["parameters"].values())) for name, e in through.items()}
     lines = [f"posedyn gap on {measured}: the twin {twin_file.name} with the named effects"]
-    for e in through:
-        (name, value), = e["parameters"].items()
-        std = e["parameter_std"][name]
-        if e["name"] == "flange_device":
-            params = replace(params, flange_mass_kg=params.flange_mass_kg + value)
-            lines.append(f"flange_device: mass_kg = {value:.4g} +- {std:.2g} (the device as mounted in the campaign's device = 1 rows)")
-        else:
-            axis = int(e["name"][-1])
-            scale[axis - 1] = 2.0**value
-            lines.append(f"{e['name']}: stiffness x {2.0**value:.4g} (log2 {value:.4g} +- {std:.2g})")
-    params = params.scaled(scale)
+    for name, e in through.items():
+        (key, value), = e["parameters"].items()
+        std = e["parameter_std"][key]
+        lines.append(f"flange_device: mass_kg = {value:.4g} +- {std:.2g} (the device as mounted in the campaign's device = 1 rows)" if name == "flange_device"
+                     else f"{name}: stiffness x {2.0**value:.4g} (log2 {value:.4g} +- {std:.2g})")
     path = out / "twin.toml"
-    write_twin(path, replace(spec, params=params), source=f"{twin_file.name} with the gap workflow's named effects from {measured.name}", comment="\n".join(lines))
+    write_twin(path, replace(spec, params=updated_twin(spec.params, values)),
+               source=f"{twin_file.name} with the gap workflow's named effects from {measured.name}", comment="\n".join(lines))
     return str(path)
 
 
