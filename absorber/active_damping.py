@@ -29,13 +29,29 @@ from __future__ import annotations
 import math
 from functools import lru_cache
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
-import control
 import numpy as np
 
 from absorber.tuning import min_real_part, tune_sims
 from posedyn.errors import InputError, check_positive
 from posedyn.robot import pose_rotation
+
+if TYPE_CHECKING:
+    import control
+
+
+def _tf():
+    """python-control's transfer-function constructor, imported on first use."""
+    import control  # heavy: it imports scipy.signal and matplotlib.pyplot, ~1.8 s of every command's start; only the controller design needs it
+
+    return control.tf
+
+
+def _pade(delay_s: float, order: int):
+    import control  # heavy, as in _tf
+
+    return control.pade(delay_s, order)
 
 
 @dataclass(frozen=True)
@@ -77,23 +93,25 @@ class Filters:
 def residue_frf(modes) -> control.TransferFunction:
     """H(s) = sum_k (alpha_k + beta_k s) / (s^2 + 2 zeta_k w_k s + w_k^2), alpha = 2 (zeta w s_re - w_d s_im),
     beta = 2 s_re (seed 000 eq. 1); `modes` is a list of (fn_hz, zeta, sigma_re, sigma_im)."""
-    total = control.tf([0.0], [1.0])
+    tf = _tf()
+    total = tf([0.0], [1.0])
     for fn, zeta, s_re, s_im in modes:
         w = 2 * math.pi * fn
         wd = w * math.sqrt(1 - zeta**2)
         alpha = 2 * (zeta * w * s_re - wd * s_im)
         beta = 2 * s_re
-        total = total + control.tf([beta, alpha], [1.0, 2 * zeta * w, w * w])
+        total = total + tf([beta, alpha], [1.0, 2 * zeta * w, w * w])
     return total
 
 
 def modal_frf(modes) -> control.TransferFunction:
     """A direct receptance from modal parameters: sum 1 / (m (s^2 + 2 zeta w s + w^2)); `modes`
     is a list of (fn_hz, zeta, k_n_per_m)."""
-    total = control.tf([0.0], [1.0])
+    tf = _tf()
+    total = tf([0.0], [1.0])
     for fn, zeta, k in modes:
         w = 2 * math.pi * fn
-        total = total + control.tf([w * w / k], [1.0, 2 * zeta * w, w * w])
+        total = total + tf([w * w / k], [1.0, 2 * zeta * w, w * w])
     return total
 
 
@@ -110,17 +128,18 @@ def path(actuator: Actuator, fn_act_hz: float, filters: Filters = Filters(), pad
     hp = two_pi * filters.hpf_hz
     wn = two_pi * filters.notch_hz
     wc = two_pi * filters.compensator_hz
-    F = control.tf([1.0], [1.0])
+    tf = _tf()
+    F = tf([1.0], [1.0])
     for _ in range(filters.lpf_count):
-        F = F * control.tf([lp * lp], [1.0, 2 * z * lp, lp * lp])
-    F = F * control.tf([1.0, 0.0, 0.0], [1.0, 2 * z * hp, hp * hp])
-    F = F * control.tf([1.0, 0.0, wn * wn], [1.0, two_pi * filters.notch_bandwidth_hz, wn * wn])
-    compensator = control.tf([1.0, 2 * actuator.zeta * wd, wd * wd], [1.0, 2 * actuator.zeta * wc, wc * wc])
-    act = control.tf([1.0, 0.0, 0.0], [1.0, 2 * actuator.zeta * wa, wa * wa])
+        F = F * tf([lp * lp], [1.0, 2 * z * lp, lp * lp])
+    F = F * tf([1.0, 0.0, 0.0], [1.0, 2 * z * hp, hp * hp])
+    F = F * tf([1.0, 0.0, wn * wn], [1.0, two_pi * filters.notch_bandwidth_hz, wn * wn])
+    compensator = tf([1.0, 2 * actuator.zeta * wd, wd * wd], [1.0, 2 * actuator.zeta * wc, wc * wc])
+    act = tf([1.0, 0.0, 0.0], [1.0, 2 * actuator.zeta * wa, wa * wa])
     F = F * compensator * act
     if pade_order:
-        num, den = control.pade(actuator.delay_s, pade_order)
-        F = F * control.tf(num, den)
+        num, den = _pade(actuator.delay_s, pade_order)
+        F = F * tf(num, den)
     return F
 
 
@@ -156,7 +175,7 @@ class DVF:
     def poles(self, gain_ns_per_m: float, pade_order: int = 3) -> np.ndarray:
         """Roots of 1 + K s F(s) H22(s) = 0 (delay by a Pade approximant)."""
         F = path(self.actuator, self.fn_act_hz, self.filters, pade_order, self.fn_compensator_hz)
-        loop = gain_ns_per_m * control.tf([1.0, 0.0], [1.0]) * F * self.h22
+        loop = gain_ns_per_m * _tf()([1.0, 0.0], [1.0]) * F * self.h22
         num = np.atleast_1d(np.squeeze(loop.num[0][0]))
         den = np.atleast_1d(np.squeeze(loop.den[0][0]))
         size = max(len(num), len(den))
