@@ -99,18 +99,27 @@ class SleCut:
 
 def normal_force(cut: SleCut, phi_bottom: np.ndarray, slices: int) -> np.ndarray:
     """F_y (N) for the bottom tooth at angles phi_bottom (rad), all teeth and slices."""
+    tangential, normal = _unit_forces(cut, phi_bottom, slices)
+    return cut.feed_per_tooth_m * (cut.kt_pa * tangential - cut.kn_pa * normal)
+
+
+def _unit_forces(cut: SleCut, phi_bottom: np.ndarray, slices: int) -> tuple[np.ndarray, np.ndarray]:
+    """The two parts of F_y per unit feed and coefficient, sum over teeth and slices of db sin(phi)
+    (sin phi, cos phi) over the engaged angles: F_y = f_t (k_t first - k_n second). They depend on
+    the tool's geometry only, so cuts that differ in feed or coefficients share them."""
     st, ex = cut.engagement_rad
     db = cut.axial_depth_m / slices
     chi = 2.0 * db * math.tan(cut.helix_rad) / cut.tool_diameter_m
-    total = np.zeros_like(phi_bottom, dtype=float)
+    tangential = np.zeros_like(phi_bottom, dtype=float)
+    normal = np.zeros_like(phi_bottom, dtype=float)
     for i in range(cut.teeth):
         for j in range(slices):
             phi = np.mod(phi_bottom + 2 * math.pi * i / cut.teeth - chi * j, 2 * math.pi)
             engaged = (phi >= st) & (phi <= ex)
-            s, c = np.sin(phi), np.cos(phi)
-            h = cut.feed_per_tooth_m * s
-            total += np.where(engaged, db * h * (cut.kt_pa * s - cut.kn_pa * c), 0.0)
-    return total
+            s = np.where(engaged, db * np.sin(phi), 0.0)
+            tangential += s * s / db
+            normal += s * np.cos(phi)
+    return tangential, normal
 
 
 def _exit_phases(cut: SleCut, slices: int) -> np.ndarray:
@@ -147,15 +156,29 @@ def sle_m(dyn: ToolTipDynamics, cut: SleCut, rpm, slices: int = 20, harmonics: i
     return out + offset_m
 
 
-@lru_cache(maxsize=16)
+def mean_normal_force_n(cut: SleCut, slices: int = 20, harmonics: int = 200) -> float:
+    """The mean surface-normal force (N) as it pushes the tool toward undercut, sign x F_0: the
+    SLE's zero-frequency term is G_yy(0) times it (module docstring, mean term)."""
+    return _normal_sign(cut) * float(_force_series(cut, slices, harmonics)[0].real)
+
+
 def _force_series(cut: SleCut, slices: int, harmonics: int) -> np.ndarray:
-    """Fourier coefficients F_k of the surface-normal force over one tooth period (k = 0..samples/2);
-    they depend on the cut only, so a pose sweep computes them once."""
+    """Fourier coefficients F_k of the surface-normal force over one tooth period (k = 0..samples/2):
+    f_t (k_t T_k - k_n N_k) with the series of the unit forces (`_unit_forces`), which depend on
+    the tool's geometry only, so a pose sweep or a campaign of cuts computes them once per tool
+    and engagement."""
+    tangential, normal = _unit_series(replace(cut, kt_pa=1.0, kn_pa=0.0, feed_per_tooth_m=1.0), slices, harmonics)
+    return cut.feed_per_tooth_m * (cut.kt_pa * tangential - cut.kn_pa * normal)
+
+
+@lru_cache(maxsize=128)
+def _unit_series(geometry: SleCut, slices: int, harmonics: int) -> tuple[np.ndarray, np.ndarray]:
     samples = max(8 * harmonics, 4096)
-    phi = np.arange(samples) * (2 * math.pi / cut.teeth) / samples
-    coeff = np.fft.rfft(normal_force(cut, phi, slices)) / samples
-    coeff.flags.writeable = False
-    return coeff
+    phi = np.arange(samples) * (2 * math.pi / geometry.teeth) / samples
+    out = tuple(np.fft.rfft(part) / samples for part in _unit_forces(geometry, phi, slices))
+    for part in out:
+        part.flags.writeable = False
+    return out
 
 
 def sle_time_domain_m(dyn: ToolTipDynamics, cut: SleCut, rpm: float, slices: int = 20, steps_per_tooth: int = 2000) -> float:
