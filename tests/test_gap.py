@@ -51,10 +51,14 @@ def run(baseline, hidden, seed, unknown=None):
     return analyse(m, y)
 
 
+#: Effects on surface location error rows: scored on independent campaigns in tests/test_gap_sle.py.
+SLE_EFFECTS = {"tool_radius_error", "spindle_runout", "path_following_offset", "load_compliance", "cutting_coefficient_error"}
+
+
 def test_the_library_has_at_least_eight_sourced_effects():
-    assert len(LIBRARY) >= 8 and set(TRUE) == set(LIBRARY)
-    for e in LIBRARY.values():
-        assert e.description and e.source and e.depends_on and e.quantities and e.parameters
+    assert len(LIBRARY) >= 8 and set(TRUE) | SLE_EFFECTS == set(LIBRARY)
+    for e in LIBRARY.values():  # depends on nothing: a constant on every row of its quantities (a tool's radius)
+        assert e.description and e.source and (e.depends_on or e.name == "tool_radius_error") and e.quantities and e.parameters
 
 
 @pytest.mark.parametrize("name", sorted(TRUE))

@@ -111,6 +111,7 @@ class CandidateEffect:
     apply: Callable = field(repr=False)
     combine: Callable | None = field(default=None, repr=False)  # (y, m, {name: theta}): effects that change one model together (the twin)
     fit_quantities: tuple | None = None  # a pose-following model candidate: selected and fitted first on these rows only (`analyse`)
+    separate_by: str = ""  # a direct measurement of this effect (named where it is undecided against another)
 
     def touches(self, m: Measurements) -> np.ndarray:
         mask = np.isin(m.quantity, self.quantities)
@@ -185,6 +186,36 @@ def _library() -> dict[str, CandidateEffect]:
         rpm = _cond(m, "rpm", np.inf)
         return _on(m, ("critical_depth_mm",), y, y * (1.0 + t[0] * (1000.0 / rpm) ** 2))
 
+    # surface location error rows (`sle_um`, + = undercut; seed 001): the model's SLE, y_0 =
+    # model_sle_um, and the mean surface-normal force as it pushes toward undercut, F_0 =
+    # model_sle_mean_force_n, are the baseline's context for each row
+    def radius_error(y, m, t):
+        # a tool t um larger in radius than nominal cuts the wall t um deeper (both milling directions)
+        return _on(m, ("sle_um",), y, y - t[0])
+
+    def runout(y, m, t):
+        # the tooth reaching farthest cuts the wall: radii R + e cos(theta + 2 pi i / N); over a
+        # random clamping phase the expected farthest reach is e (N / pi) sin(pi / N)
+        n = np.maximum(_cond(m, "teeth", 1.0), 1.0)
+        return _on(m, ("sle_um",), y, y - t[0] * n / np.pi * np.sin(np.pi / n))
+
+    def path_following(y, m, t):
+        # the robot's path lags outside the commanded path in proportion to the feed speed (seed
+        # 001 Table 2: 14 um at 4.0 m/min, 32-34 um at 8.0-8.2 m/min, undercut on every side)
+        return _on(m, ("sle_um",), y, y + t[0] * _cond(m, "feed_mm_per_min") / 1000.0)
+
+    def load_compliance(y, m, t):
+        # a compliance the impact test does not see (joints under the cutting load, well below the
+        # tooth-passing frequency) responds to the mean force only: dy = dC F_0
+        return _on(m, ("sle_um",), y, y + t[0] * _cond(m, "model_sle_mean_force_n"))
+
+    def cutting_coefficients(y, m, t):
+        # k_t and k_n both (1 + s) times the model's: the SLE is linear in the force, and the
+        # critical depth of the delay equation (a k_t H(t), H fixed by k_n / k_t) is 1 / (1 + s) times
+        s = t[0] / 100.0
+        y = _on(m, ("sle_um",), y, y + s * _cond(m, "model_sle_um"))
+        return _on(m, ("critical_depth_mm",), y, y / (1.0 + s))
+
     effects = [
         CandidateEffect("device_mass", "added device mass on the spindle housing lowers the robot modes", "seed 000 section 2, Fig. 2",
                         ("fn_hz",), ("device",), (Parameter("mass_kg", 2.0, 0.0, 200.0),), device_mass),
@@ -204,6 +235,21 @@ def _library() -> dict[str, CandidateEffect]:
                         ("k_n_per_m", "fn_hz"), ("force_n",), (Parameter("softening_per_kn", 0.01, -0.9, 0.9),), force_level),
         CandidateEffect("process_damping", "process damping raises the critical depth at low cutting speed", "Altintas, Eynian, Onozuka 2008; not in the seeds",
                         ("critical_depth_mm",), ("rpm",), (Parameter("strength", 0.1, 0.0, 100.0),), process_damping),
+        CandidateEffect("tool_radius_error", "the tool's cutting radius differs from nominal (a constant overcut or undercut)", "seed 001 section 2.3 (the part dimension is the radial depth minus the SLE)",
+                        ("sle_um",), (), (Parameter("radius_error_um", 5.0, -500.0, 500.0),), radius_error,
+                        separate_by="measure the tool radius on a presetter"),
+        CandidateEffect("spindle_runout", "tool runout: the tooth reaching farthest cuts the wall, more so with more teeth", "milling surface generation (Schmitz and Smith, Machining Dynamics, ch. 7); not in the seeds",
+                        ("sle_um",), ("teeth",), (Parameter("runout_um", 5.0, 0.0, 200.0),), runout,
+                        separate_by="measure the runout at the tool with a dial indicator"),
+        CandidateEffect("path_following_offset", "the robot's path runs outside the commanded path, more so the faster it feeds", "seed 001 section 4.1, Table 2 and Fig. 3",
+                        ("sle_um",), ("feed_mm_per_min",), (Parameter("offset_um_per_m_per_min", 1.0, -50.0, 50.0),), path_following,
+                        separate_by="record the robot's path during the cut (controller positions, seed 001 Fig. 3)"),
+        CandidateEffect("load_compliance", "under the cutting load the tool tip is more compliant than the impact-test modes say (the static deflection differs)", "seed 001 section 4.5 (robot SLE set by its low modes); seed 003 (load-dependent joint stiffness)",
+                        ("sle_um",), ("model_sle_mean_force_n",), (Parameter("compliance_um_per_n", 0.05, -5.0, 50.0),), load_compliance,
+                        separate_by="a static stiffness test at the tool tip under a cutting-size load"),
+        CandidateEffect("cutting_coefficient_error", "the specific cutting forces k_t and k_n differ from the cut file's (every force, SLE and critical depth scale)", "seed 001 Table 3 (coefficients from cutting tests); seed 004 eqs. 1-3",
+                        ("sle_um", "critical_depth_mm"), ("model_sle_um",), (Parameter("force_error_pct", 5.0, -80.0, 300.0),), cutting_coefficients,
+                        separate_by="measure the cutting force on a dynamometer"),
     ]
     return {e.name: e for e in effects}
 
@@ -655,12 +701,14 @@ def _pose_following_first(m: Measurements, baseline: np.ndarray, library: dict, 
 def confounded(a: CandidateEffect, b: CandidateEffect, m: Measurements) -> bool:
     """Whether two effects' conditions vary together in the design: over the rows either touches
     where both conditions are given, |correlation| >= CONFOUNDED for some pair of them, or one
-    is a function of the other's levels (a device mounted exactly when the force is high)."""
+    is a function of the other's levels (a device mounted exactly when the force is high).
+    Conditions only: `model_*` context columns (what the model predicts for a row) are left to
+    the BIC tie (TIE_BIC)."""
     rows = a.touches(m) | b.touches(m)
     for ca in a.depends_on:
         for cb in b.depends_on:
-            if ca == cb:
-                continue
+            if ca == cb or ca.startswith("model_") or cb.startswith("model_"):
+                continue  # the model's own context (e.g. its SLE and mean force) is not designed: the BIC tie decides there
             x, y = m.column(ca), m.column(cb)
             ok = rows & np.isfinite(x) & np.isfinite(y)
             if ok.sum() < 3 or np.std(x[ok]) == 0 or np.std(y[ok]) == 0:
@@ -679,8 +727,8 @@ def _determines(x: np.ndarray, y: np.ndarray) -> bool:
 
 
 def separating_measurement(a: CandidateEffect, b: CandidateEffect) -> str:
-    only_a = [c for c in a.depends_on if c not in b.depends_on]
-    only_b = [c for c in b.depends_on if c not in a.depends_on]
+    only_a = [c for c in a.depends_on if c not in b.depends_on and not c.startswith("model_")]  # conditions one can set
+    only_b = [c for c in b.depends_on if c not in a.depends_on and not c.startswith("model_")]
     q_a = [q for q in a.quantities if q not in b.quantities]
     q_b = [q for q in b.quantities if q not in a.quantities]
     parts = []
@@ -688,6 +736,7 @@ def separating_measurement(a: CandidateEffect, b: CandidateEffect) -> str:
         parts.append(f"vary {', '.join(only_a) or '-'} while holding {', '.join(only_b) or '-'} fixed (and the reverse)")
     if q_a or q_b:
         parts.append(f"measure {', '.join(q_a + q_b)}: only one of them changes it")
+    parts += [e.separate_by for e in (a, b) if e.separate_by]
     return "; ".join(parts) or "repeat with the conditions they depend on varied independently"
 
 

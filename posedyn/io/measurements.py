@@ -5,7 +5,10 @@ c_deg`), `quantity` (one of QUANTITIES), `direction` (x, y or z for modal quanti
 empty), `mode` (1, 2, ... for modal quantities, else empty), `value`, optional `std` (default
 from DEFAULT_STD), and any number of numeric condition columns (empty where a row does not have
 the condition): e.g. `rpm`, `field_mt`, `temperature_c`, `absorber_angle_deg`, `device` (0/1),
-`moving` (0/1), `fixture` (0/1), `force_n`.
+`moving` (0/1), `fixture` (0/1), `force_n`. Surface location error rows (`sle_um`, + = undercut,
+`direction` = the surface normal x or y, `std` required) need `rpm`, `teeth`, `tool_diameter_mm`,
+`radial_depth_mm`, `axial_depth_mm`, `feed_per_tooth_mm`, optional `up_milling` (0/1),
+`helix_deg`, `kt_mpa`, `kn_mpa`, `feed_mm_per_min`.
 """
 
 from __future__ import annotations
@@ -20,8 +23,8 @@ import numpy as np
 from posedyn.errors import InputError
 from posedyn.gap import Measurements
 
-QUANTITIES = ("fn_hz", "k_n_per_m", "k_xy_n_per_m", "critical_depth_mm", "absorber_fn_hz", "absorber_zeta")
-#: Relative std used when a row has none (k_xy: relative to nothing, so it must be given).
+QUANTITIES = ("fn_hz", "k_n_per_m", "k_xy_n_per_m", "critical_depth_mm", "absorber_fn_hz", "absorber_zeta", "sle_um")
+#: Relative std used when a row has none (k_xy and sle_um: relative to nothing, so it must be given).
 DEFAULT_STD = {"fn_hz": 0.003, "k_n_per_m": 0.03, "critical_depth_mm": 0.03, "absorber_fn_hz": 0.005, "absorber_zeta": 0.05}
 TEXT = ("pose_id", "quantity", "direction")
 REQUIRED = ("pose_id", "x_mm", "y_mm", "z_mm", "quantity", "value")
@@ -65,6 +68,8 @@ def read_measurements(path: str | os.PathLike) -> Measurements:
                 raise InputError("a number", got=row.get(c), row=i, line=line, column=c, **where)
         if q in ("fn_hz", "k_n_per_m") and (row.get("direction") not in ("x", "y", "z") or not np.isfinite(columns.get("mode", np.array([np.nan] * len(rows)))[i - 1])):
             raise InputError("direction x|y|z and a mode number for a modal quantity", got=(row.get("direction"), row.get("mode")), row=i, line=line, column="direction", **where)
+        if q == "sle_um" and row.get("direction") not in ("x", "y"):
+            raise InputError("direction x or y (the surface normal) for an sle_um row", got=row.get("direction"), row=i, line=line, column="direction", **where)
         std = columns.get("std")
         if std is not None and np.isfinite(std[i - 1]) and std[i - 1] <= 0:
             raise InputError("std > 0", got=std[i - 1], row=i, line=line, column="std", **where)

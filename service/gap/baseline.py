@@ -10,6 +10,7 @@ row's `field_mt`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -20,10 +21,11 @@ from posedyn.dynamics import ToolTipDynamics
 from posedyn.errors import InputError
 from posedyn.gap import LIBRARY, Measurements, predict
 from posedyn.gap.twin_candidates import MODEL_JOINT_COLUMNS, twin_candidates
-from posedyn.io.cut import read_cut
+from posedyn.io.cut import read_cut, read_sle_cut
 from posedyn.io.model_dir import load_model
 from posedyn.io.twin_file import load_twin
 from posedyn.robot import GridPose, direction_rows, pose_modes, tool_pose
+from posedyn.sle import SleCut, mean_normal_force_n, sle_m
 from posedyn.stability import critical_points
 from posedyn.table import JOINT_COLUMNS, ORIENTATION_COLUMNS, POSITION_COLUMNS, Mode, PoseSet
 
@@ -44,6 +46,8 @@ class Baseline:
         else:
             self.robot, self.params = load_twin(twin_file)
         self.cut = read_cut(cut_file)[0] if cut_file is not None else None
+        sle_cut = read_sle_cut(cut_file) if cut_file is not None else None
+        self.helix_deg = math.degrees(sle_cut.helix_rad) if sle_cut is not None else 0.0
         self.absorber = read_absorber(absorber_file)
 
     def twin(self):
@@ -107,7 +111,7 @@ class Baseline:
         y = np.full(n, np.nan)
         model_k = np.full(n, np.nan)
         kx, ky = np.full(n, np.nan), np.full(n, np.nan)
-        depth_rows = []
+        depth_rows, sle_rows = [], []
         for i in range(n):
             q, p = m.quantity[i], m.pose_id[i]
             if q in ("fn_hz", "k_n_per_m"):
@@ -129,23 +133,81 @@ class Baseline:
                 if not np.isfinite(m.column("rpm")[i]):
                     raise InputError("an rpm for a critical_depth_mm row", row=i + 1, column="rpm")
                 depth_rows.append(i)
-        if depth_rows and self.cut is None:
-            raise InputError("a cut for the critical_depth_mm rows (--cut CUT.toml, or a model directory trained with --cut)", row=depth_rows[0] + 1, column="--cut")
+            elif q == "sle_um":
+                sle_rows.append(i)
+        if (depth_rows or sle_rows) and self.cut is None:
+            raise InputError("a cut for the critical_depth_mm and sle_um rows (--cut CUT.toml, or a model directory trained with --cut)",
+                             row=(depth_rows or sle_rows)[0] + 1, column="--cut")
+        structures = {p: _structure(rows) for p, rows in modes.items()}
         if depth_rows:
-            structures = []
-            for i in depth_rows:
-                rows = modes[m.pose_id[i]]
-                structures.append(ToolTipDynamics.from_modes(
-                    x=[Mode(*rows[k]) for k in sorted(rows) if k[0] == "x"], y=[Mode(*rows[k]) for k in sorted(rows) if k[0] == "y"]
-                ))
-            results = critical_points(structures, self.cut, m.column("rpm")[depth_rows], frequencies=False)
+            results = critical_points([structures[m.pose_id[i]] for i in depth_rows], self.cut, m.column("rpm")[depth_rows], frequencies=False)
             y[depth_rows] = [r.depth_m * 1e3 for r in results]
         conditions = dict(m.conditions, model_k_n_per_m=model_k, model_k_x_n_per_m=kx, model_k_y_n_per_m=ky)
+        if sle_rows:
+            conditions.update(self._sle(m, sle_rows, structures, y))
         joints = self.joint_angles(m)
         if joints:
             q = np.array([joints[p] for p in m.pose_id])
             conditions.update({c: q[:, j] for j, c in enumerate(MODEL_JOINT_COLUMNS)})
         return y, replace(m, conditions=conditions)
+
+
+    def _sle(self, m: Measurements, rows: list[int], structures: dict, y: np.ndarray) -> dict:
+        """SLE rows (`posedyn.sle.sle_m`, + = undercut) into y, and their context: the model's SLE
+        and mean surface-normal force (model_sle_um, model_sle_mean_force_n) and the feed speed
+        (feed_mm_per_min = feed per tooth x teeth x rpm where the campaign does not give it)."""
+        n = len(m)
+        model_sle, force = np.full(n, np.nan), np.full(n, np.nan)
+        feed_speed = m.column("feed_mm_per_min").copy()
+        for i in rows:
+            cut, rpm, face = self._sle_cut(m, i)
+            dyn = structures[m.pose_id[i]]
+            if face == "x":  # the surface normal is x: turn the axes so that it becomes y (as `posedyn sle --direction x`)
+                dyn = dyn.rotated(-math.pi / 2)
+            y[i] = model_sle[i] = float(sle_m(dyn, cut, rpm)[0]) * 1e6
+            force[i] = mean_normal_force_n(cut)
+            if not np.isfinite(feed_speed[i]):
+                feed_speed[i] = cut.feed_per_tooth_m * 1e3 * cut.teeth * rpm
+        return {"model_sle_um": model_sle, "model_sle_mean_force_n": force, "feed_mm_per_min": feed_speed}
+
+    def _sle_cut(self, m: Measurements, i: int) -> tuple[SleCut, float, str]:
+        """(SleCut, rpm, surface-normal direction) of SLE row i: the row's tool and cut, with k_t,
+        k_n from the row (kt_mpa, kn_mpa) or the cut file, the helix from the row (helix_deg), the
+        cut file's [sle] section or 0, down milling unless up_milling = 1."""
+        where = dict(row=i + 1)
+        face = str(m.direction[i])
+        if face not in ("x", "y"):
+            raise InputError("the surface-normal direction x or y for an sle_um row", got=face, column="direction", **where)
+
+        def value(column, default=np.nan):
+            v = m.column(column)[i]
+            if np.isfinite(v):
+                return float(v)
+            if math.isfinite(default):
+                return default
+            raise InputError(f"a {column} for an sle_um row", got="empty", column=column, **where)
+
+        teeth = value("teeth")
+        if teeth != round(teeth):
+            raise InputError("an integer number of teeth", got=teeth, column="teeth", **where)
+        up = value("up_milling", 0.0)
+        if up not in (0.0, 1.0):
+            raise InputError("up_milling 0 (down milling) or 1 (up milling)", got=up, column="up_milling", **where)
+        try:
+            cut = SleCut(
+                teeth=int(teeth), kt_pa=value("kt_mpa", self.cut.kt_pa * 1e-6) * 1e6, kn_pa=value("kn_mpa", self.cut.kn_pa * 1e-6) * 1e6,
+                tool_diameter_m=value("tool_diameter_mm") * 1e-3, helix_rad=math.radians(value("helix_deg", self.helix_deg)),
+                radial_depth_m=value("radial_depth_mm") * 1e-3, axial_depth_m=value("axial_depth_mm") * 1e-3,
+                feed_per_tooth_m=value("feed_per_tooth_mm") * 1e-3, milling="up" if up else "down",
+            )
+        except InputError as exc:
+            raise exc.located(**where) from None
+        return cut, value("rpm"), face
+
+
+def _structure(rows: dict) -> ToolTipDynamics:
+    """The tool tip's x-y structure from a pose's {(direction, mode): (fn, zeta, k)}."""
+    return ToolTipDynamics.from_modes(x=[Mode(*rows[k]) for k in sorted(rows) if k[0] == "x"], y=[Mode(*rows[k]) for k in sorted(rows) if k[0] == "y"])
 
 
 def campaign_poses(m: Measurements, rows: list[int]) -> PoseSet:
