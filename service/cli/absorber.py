@@ -12,7 +12,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from absorber.chain import ScheduleConfig, schedule_entries
+from absorber.chain import ScheduleConfig, schedule_entries, schedule_poses
 from absorber.files import read_absorber, read_actuator, read_host
 from absorber.robust import METHODS, cutting_force_harmonics, monte_carlo_limits, robust_tuning
 from absorber.tuning import Host, absolute_limit_m, min_real_part, tune_sims, uncontrolled_min_real_part
@@ -21,8 +21,9 @@ from posedyn.io.tool_file import read_tool
 from posedyn.tool_change import tool_changed_table
 from posedyn.io.atomic import write_text_atomic
 from posedyn.io.cut import read_cut
+from posedyn.io import read_pose_table
 from posedyn.stability import Cut, mean_force_matrix
-from service.cli.common import Milling, console, finite_or_none, modal_input_for, print_json, resolve_cut
+from service.cli.common import Milling, console, finite_or_none, modal_input_for, print_json, resolve_cut, twin_modes_at
 
 app = typer.Typer(help="MRF absorber: optimal tuning, field for a target frequency.", no_args_is_help=True)
 
@@ -164,8 +165,9 @@ def field_cmd(
 
 
 def schedule(
-    model_dir: Optional[Path] = typer.Argument(None, help="Model directory (or give --modes)."),
+    model_dir: Optional[Path] = typer.Argument(None, help="Model directory (or give --modes or --twin)."),
     modes: Optional[Path] = typer.Option(None, "--modes", help="Modal table instead of a model."),
+    twin: Optional[Path] = typer.Option(None, "--twin", help="Robot twin file (e.g. one `posedyn gap --out` wrote): its own modes at the poses (3-D mode shapes) instead of a model."),
     poses: Path = typer.Option(..., "--poses", help="Poses to schedule (CSV with the pose columns)."),
     cut: Optional[Path] = typer.Option(None, "--cut", help="Cut file (TOML; default: MODEL_DIR/cut.toml)."),
     absorber: Optional[Path] = typer.Option(None, "--absorber", help="Absorber file (default: seed 004's design)."),
@@ -188,10 +190,15 @@ def schedule(
         raise InputError("--reference-tool and --target-tool together", got="one of them", column="--target-tool")
     if target_tool is not None and robust:
         raise InputError("--robust without --target-tool (the coupled modes carry no predictive distribution yet)", got="both", column="--robust")
-    table, distributions = modal_input_for(model_dir, modes, poses, distributions=robust)
-    if target_tool is not None:
-        table = tool_changed_table(table, read_tool(reference_tool), read_tool(target_tool), pivot_mm * 1e-3)
-    entries = schedule_entries(table, config, distributions)
+    if twin is not None:
+        if model_dir is not None or modes is not None or target_tool is not None or robust:
+            raise InputError("--twin alone as the mode source (no MODEL_DIR, --modes, --target-tool or --robust)", got="more", column="--twin")
+        entries = [s.to_json() for s in schedule_poses(twin_modes_at(twin, read_pose_table(poses), poses), config)]
+    else:
+        table, distributions = modal_input_for(model_dir, modes, poses, distributions=robust)
+        if target_tool is not None:
+            table = tool_changed_table(table, read_tool(reference_tool), read_tool(target_tool), pivot_mm * 1e-3)
+        entries = schedule_entries(table, config, distributions)
     if out is not None:
         _write_json(out, entries)
     if as_json:

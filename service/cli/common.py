@@ -1,4 +1,5 @@
-"""What the commands share: output helpers and the modes at requested poses."""
+"""What the commands share: output helpers and the modes at requested poses (a modal table, a
+model's predictions or the robot twin's own modes)."""
 
 from __future__ import annotations
 
@@ -12,10 +13,12 @@ from typing import Optional
 
 from rich.console import Console
 
+from absorber.chain import PoseModes, twin_pose_modes
 from posedyn.errors import InputError
 from posedyn.io import read_modal_table, read_pose_table
 from posedyn.io.json_values import json_ready
 from posedyn.io.model_dir import load_model
+from posedyn.io.twin_file import load_twin
 from posedyn.table import PoseSet
 from posedyn.uncertainty import distributions_from_table
 
@@ -57,6 +60,16 @@ def modal_input_for(model_dir: Optional[Path], modes: Optional[Path], poses, dis
     model = load_model(model_dir)
     table = model.predict_table(pose_set)
     return table, model.predict_distributions(pose_set, table) if distributions else None
+
+
+def twin_modes_at(twin: Path, poses: PoseSet, poses_file: Path) -> list[PoseModes]:
+    """The twin file's own modes (all its robot modes, 3-D shapes) at every pose; every pose must
+    be reachable."""
+    found = twin_pose_modes(*load_twin(twin), poses)
+    missing = [poses.pose_id[i] for i in range(len(poses)) if i not in found]
+    if missing:
+        raise InputError("poses the twin robot can reach", got=missing[:3], file=str(poses_file), column="pose_id")
+    return [found[i] for i in range(len(poses))]
 
 
 def resolve_cut(cut: Optional[Path], model_dir: Optional[Path]) -> Path:

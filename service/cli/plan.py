@@ -11,17 +11,16 @@ from typing import Optional
 import numpy as np
 import typer
 
-from absorber.chain import ScheduleConfig, absorber_depths_m, depth_weight, schedule_poses, table_pose_modes, twin_pose_modes
+from absorber.chain import ScheduleConfig, absorber_depths_m, depth_weight, schedule_poses, table_pose_modes
 from absorber.coil_dynamics import CoilDrive
 from absorber.field_plan import FieldPlanner, simulate, step_schedule
 from absorber.files import read_absorber
 from posedyn.io.atomic import write_text_atomic
 from posedyn.io.cut import read_cut
 from posedyn.io.modal_csv import read_tool_path
-from posedyn.io.twin_file import load_twin
 from posedyn.errors import InputError
 from service.cli.absorber import Policy
-from service.cli.common import console, modal_table_for, print_json, resolve_cut
+from service.cli.common import console, modal_table_for, print_json, resolve_cut, twin_modes_at
 
 COLUMNS = ("time_s", "pose_id", "target_hz", "voltage_v", "current_a", "field_mt", "fluid_field_mt", "temperature_c", "frequency_hz", "step_frequency_hz", "step_current_a")
 
@@ -92,11 +91,7 @@ def _path_modes(model_dir, modes, twin, poses, path) -> list:
         raise InputError("one mode source: MODEL_DIR, --modes MODAL.csv or --twin TWIN.toml", got="none" if model_dir is None and modes is None else "more than one", column="--twin")
     if twin is None:
         return table_pose_modes(modal_table_for(model_dir, modes, poses))
-    found = twin_pose_modes(*load_twin(twin), poses)
-    missing = [poses.pose_id[i] for i in range(len(poses)) if i not in found]
-    if missing:
-        raise InputError("poses the twin robot can reach", got=missing[:3], file=str(path), column="pose_id")
-    return [found[i] for i in range(len(poses))]
+    return twin_modes_at(twin, poses, path)
 
 
 def _depths(entries, pose_of_point, frequency_hz, fluid_field_t, config: ScheduleConfig) -> np.ndarray:
