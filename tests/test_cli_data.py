@@ -44,7 +44,9 @@ def test_data_summary_covers_every_shipped_file(datasets):
     shipped = sorted(str(p) for p in datasets.rglob("*") if p.suffix in (".csv", ".toml"))
     assert sorted(item["file"] for item in report) == shipped
     kinds = {item["kind"] for item in report}
-    assert {"modal_table", "mrf_absorber", "host_and_cut", "active_damping"} <= kinds
+    assert {"modal_table", "mrf_absorber", "host_and_cut", "active_damping", "measurement_campaign"} <= kinds
+    walls = next(item for item in report if item["file"].endswith("sle_walls.csv"))
+    assert walls["quantities"] == {"sle_um": 32} and walls["poses"] == 2
 
 
 def test_version_and_module_entry_point():

@@ -1,14 +1,16 @@
-"""`posedyn data`: validate and summarise modal-test tables and parameter files."""
+"""`posedyn data`: validate and summarise modal-test tables, measurement campaigns and parameter files."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import typer
 from rich.table import Table
 
 from posedyn.errors import InputError
 from posedyn.io import flatten, read_modal_table, read_params
+from posedyn.io.measurements import read_measurements
 from posedyn.io.shipped import DATASETS
 from service.cli.common import console, print_json
 
@@ -59,7 +61,7 @@ def data_summary(
     folder: Path = typer.Argument(DATASETS, help="Folder to walk (CSV modal tables and TOML parameter files; default: the shipped data)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object per file."),
 ):
-    """Validate every modal table (*.csv) and parameter file (*.toml) under a folder."""
+    """Validate every modal table and measurement campaign (*.csv) and parameter file (*.toml) under a folder."""
     if not folder.is_dir():
         raise InputError("a folder", got=str(folder))
     files = sorted(p for p in folder.rglob("*") if p.suffix in (".csv", ".toml"))
@@ -67,7 +69,11 @@ def data_summary(
         raise InputError("at least one .csv or .toml file", got="none", file=str(folder))
     report = []
     for path in files:
-        if path.suffix == ".csv":
+        if path.suffix == ".csv" and "quantity" in path.read_text(encoding="utf-8-sig").partition("\n")[0].split(","):
+            m = read_measurements(path)  # a measurement campaign for `posedyn gap` (README: Measurement campaigns)
+            quantities = {str(q): int(n) for q, n in zip(*np.unique(m.quantity, return_counts=True))}
+            report.append({"file": str(path), "kind": "measurement_campaign", "rows": len(m), "poses": len(set(m.pose_id)), "quantities": quantities})
+        elif path.suffix == ".csv":
             report.append({"file": str(path), "kind": "modal_table", **read_modal_table(path).summary()})
         else:
             params = read_params(path)
@@ -81,7 +87,10 @@ def data_summary(
     if tables:
         out.print(_modal_summary_table("Modal-test tables (one row per pose x direction x mode)", tables))
     for item in report:
-        if item["kind"] != "modal_table":
+        if item["kind"] == "measurement_campaign":
+            out.print(f"{item['file']} (measurement campaign): {item['rows']} rows at {item['poses']} poses, "
+                      + ", ".join(f"{n} {q}" for q, n in item["quantities"].items()))
+        elif item["kind"] != "modal_table":
             table = Table(title=f"{item['file']} ({item['kind']})", caption=item["source"], title_justify="left")
             table.add_column("parameter")
             table.add_column("value", justify="right")
