@@ -269,3 +269,37 @@ def test_gap_cli_writes_the_twin_with_the_named_effects(tmp_path):
         assert got["absorber"]["field_mt"] == pytest.approx(expected["absorber"]["field_mt"], rel=1e-6, abs=1e-9)
         changes = [abs(got[k] / before[k] - 1.0) for k in ("critical_depth_mm", "dominant_chatter_hz", "critical_depth_with_absorber_mm")]
         assert max(changes) > 0.01, changes
+
+
+def test_two_joints_the_fn_rows_cannot_tell_apart_get_the_pose_to_measure_next():
+    """Where two changed twins fit a campaign alike, the workflow names the pose and mode where
+    they differ most (a 5 x 5 x 5 search over the campaign's x, y, beta box): there the two
+    predictions are further apart than at any pose the campaign measured, and by the amount the
+    text states (checked here with the twin directly)."""
+    import math
+    import re
+
+    from posedyn.gap.twin_candidates import updated_twin
+    from posedyn.robot import ToolPose, direction_rows
+    from posedyn.robot.twin import twin_modes
+
+    nominal, m, _ = twin_campaign(0)
+    robot, params = nominal.twin()
+    a, b = {"joint_stiffness_a2": math.log2(0.8)}, {"joint_stiffness_a3": math.log2(1.3)}
+    text = nominal.library()["joint_stiffness_a2"].separate(m, a, b)
+    d, j, x, y, z, beta, fa, fb = re.match(
+        r"measure fn of (\w) mode (\d) at x (\S+) mm, y (\S+) mm, z (\S+) mm, beta (\S+) deg: (\S+) Hz with .*, (\S+) Hz with", text).groups()
+
+    def fn(q, values):
+        modes = twin_modes(robot, q, updated_twin(params, values))
+        return {(dd, jj): row[0] for dd in ("x", "y") for jj, row in enumerate(direction_rows(modes, dd, params.robot_modes_per_direction), 1)}
+
+    q = robot.inverse(ToolPose.from_beta(float(x) * 1e-3, float(y) * 1e-3, float(z) * 1e-3, math.radians(float(beta))))
+    there = fn(q, a)[(d, int(j))], fn(q, b)[(d, int(j))]
+    assert there == pytest.approx((float(fa), float(fb)), rel=2e-3, abs=2e-3)  # x, y, beta printed rounded
+    gap = abs(there[0] / there[1] - 1.0)
+    for p in set(m.pose_id):
+        i = np.flatnonzero(m.pose_id == p)[0]
+        qp = np.array([m.conditions[f"model_q{k}_rad"][i] for k in range(1, 7)])
+        fa_p, fb_p = fn(qp, a), fn(qp, b)
+        assert all(abs(fa_p[k] / fb_p[k] - 1.0) < gap for k in fa_p.keys() & fb_p.keys())

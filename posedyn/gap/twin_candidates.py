@@ -23,8 +23,9 @@ from dataclasses import replace
 
 import numpy as np
 
+from posedyn.errors import InputError
 from posedyn.gap.analysis import CandidateEffect, Measurements, Parameter
-from posedyn.robot import Robot, TwinParameters, direction_rows
+from posedyn.robot import Robot, ToolPose, TwinParameters, direction_rows
 from posedyn.robot.twin import twin_modes
 
 MODEL_JOINT_COLUMNS = tuple(f"model_q{j}_rad" for j in range(1, 7))
@@ -94,12 +95,46 @@ def twin_candidates(robot: Robot, params: TwinParameters) -> dict[str, Candidate
         return CandidateEffect(
             name, f"axis {j + 1}'s joint stiffness differs from the twin's (the modes recomputed at every pose)",
             "seed 003 section 2 (joint stiffness identification); Dumas et al. 2011", ("fn_hz", "k_n_per_m"), (),
-            (Parameter("log2_factor", 0.1, -2.0, 2.0),), lambda y, m, t: combine(y, m, {name: t}), combine=combine, fit_quantities=("fn_hz",))
+            (Parameter("log2_factor", 0.1, -2.0, 2.0),), lambda y, m, t: combine(y, m, {name: t}), combine=combine, fit_quantities=("fn_hz",),
+            separate=separate)
+
+    def separate(m: Measurements, a: dict, b: dict) -> str | None:
+        """The pose (over the campaign's x, y, beta box, 5 x 5 x 5) and mode where the twin changed
+        by `a` and by `b` predict the most different fn, as the measurement to take next."""
+        x, y, z, beta = (m.column(c) for c in ("x_mm", "y_mm", "z_mm", "beta_deg"))
+        ok = np.isfinite(x) & np.isfinite(y) & np.isfinite(z) & np.isfinite(beta)
+        if not ok.any():
+            return None
+        params_a, params_b = updated_twin(params, a), updated_twin(params, b)
+        data = robot.model.createData()
+        best = None
+        for px in np.linspace(x[ok].min(), x[ok].max(), 5):
+            for py in np.linspace(y[ok].min(), y[ok].max(), 5):
+                for pb in np.linspace(beta[ok].min(), beta[ok].max(), 5):
+                    try:
+                        q = robot.inverse(ToolPose.from_beta(px * 1e-3, py * 1e-3, float(np.median(z[ok])) * 1e-3, math.radians(pb)), data)
+                    except InputError:
+                        continue
+                    rows_a, rows_b = (direction_fn(twin_modes(robot, q, p, data)) for p in (params_a, params_b))
+                    for key in rows_a.keys() & rows_b.keys():
+                        gap = abs(rows_a[key] / rows_b[key] - 1.0)
+                        if best is None or gap > best[0]:
+                            best = (gap, px, py, pb, key, rows_a[key], rows_b[key])
+        if best is None:
+            return None
+        gap, px, py, pb, (d, j), fa, fb = best
+        names_a, names_b = ", ".join(f"{k} {v:.3g}" for k, v in a.items()), ", ".join(f"{k} {v:.3g}" for k, v in b.items())
+        mounted = " with the device mounted" if "flange_device" in a or "flange_device" in b else ""
+        return (f"measure fn of {d} mode {j}{mounted} at x {px:.0f} mm, y {py:.0f} mm, z {np.median(z[ok]):.0f} mm, beta {pb:.0f} deg: "
+                f"{fa:.3f} Hz with {names_a}, {fb:.3f} Hz with {names_b} ({100 * gap:.2g} % apart)")
+
+    def direction_fn(modes) -> dict:
+        return {(d, j): row[0] for d in ("x", "y") for j, row in enumerate(direction_rows(modes, d, params.robot_modes_per_direction), 1)}
 
     out = {f"joint_stiffness_a{j + 1}": joint(j) for j in range(6)}
     out["flange_device"] = CandidateEffect(
         "flange_device", "a device mounted on the flange (the twin's modes recomputed with its mass: fn and modal stiffness change)",
         "seed 000 section 2 and Fig. 2 (actuator mass lowers and splits the robot modes)",
         ("fn_hz", "k_n_per_m"), ("device",), (Parameter("mass_kg", 2.0, 0.0, 200.0),), lambda y, m, t: combine(y, m, {"flange_device": t}),
-        combine=combine)
+        combine=combine, separate=separate)
     return out
