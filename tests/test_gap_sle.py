@@ -194,3 +194,35 @@ def test_the_shipped_wall_campaign_from_the_independent_geometric_simulation():
     assert abs(got["path_following_offset"][0] - 4.0) <= 2 * got["path_following_offset"][1]
     assert abs(got["tool_radius_error"][0] + 6.0) <= 2 * got["tool_radius_error"][1]
     assert r.rmse_before > 5 and r.rmse_after < 1.2
+
+
+def test_gap_writes_the_cut_with_the_named_cutting_and_tool_effects(tmp_path):
+    """`posedyn gap --out DIR` on the wall campaign writes DIR/cut.toml: the cut file with its SLE
+    offset grown by exactly the named effects at the file's own cut (minus the radius error, the
+    path offset at its feed speed), which `posedyn sweep` adds to its SLE; the coefficients
+    untouched. A named cutting-coefficient error scales k_t and k_n instead."""
+    import json
+    import subprocess
+    import sys
+    from types import SimpleNamespace
+
+    from posedyn.io.cut import read_cut, read_sle_cut
+    from service.cli.gap import _write_updated_cut
+
+    cut_file = ROOT / "datasets/cuts/sweep_demo_cut.toml"
+    done = subprocess.run([sys.executable, "-m", "service", "gap", "--measured", str(ROOT / "datasets/campaigns/sle_walls.csv"), "--twin",
+                           "--cut", str(cut_file), "--out", str(tmp_path / "gap"), "--json"], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    doc = json.loads(done.stdout)
+    fitted = {e["name"]: next(iter(e["parameters"].values())) for e in doc["effects"]}
+    assert doc["updated_cut"] == str(tmp_path / "gap/cut.toml")
+    before, after = read_sle_cut(cut_file), read_sle_cut(tmp_path / "gap/cut.toml")
+    speed_m_min = 0.05 * 3 * 2000.0 / 1000.0  # the file's feed per tooth x teeth x rpm
+    assert after[0] == before[0] and read_cut(tmp_path / "gap/cut.toml") == read_cut(cut_file)
+    assert after[1] * 1e6 == pytest.approx(before[1] * 1e6 - fitted["tool_radius_error"] + fitted["path_following_offset"] * speed_m_min, rel=1e-12)
+
+    result = SimpleNamespace(effects=[{"name": "cutting_coefficient_error", "parameters": {"force_error_pct": 25.0}}])
+    written = _write_updated_cut(tmp_path, result, cut_file, Path("meas.csv"))
+    cut, nominal = read_cut(written)[0], read_cut(cut_file)[0]
+    assert cut.kt_pa == pytest.approx(1.25 * nominal.kt_pa, rel=1e-12) and cut.kn_pa == pytest.approx(1.25 * nominal.kn_pa, rel=1e-12)
+    assert read_sle_cut(written)[1] == 0.0

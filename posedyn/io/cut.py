@@ -1,8 +1,10 @@
 """Cut parameter files (TOML, `kind = "cut"`): `[cut] rpm, teeth, kt_mpa, kn_mpa,
 radial_immersion, milling, feed_angle_deg, tool_diameter_mm`, optional `[stability] steps` (an
 expert override: semi-discretization with that many steps instead of the converged engine) and
-optional `[sle] helix_deg, axial_depth_mm, feed_per_tooth_mm` (the surface location error of
-this cut; the radial depth is radial_immersion x tool_diameter_mm)."""
+optional `[sle] helix_deg, axial_depth_mm, feed_per_tooth_mm` and `offset_um` (the surface
+location error of this cut; the radial depth is radial_immersion x tool_diameter_mm; the offset,
+default 0, is added to the SLE: a robot path offset, a tool radius error, as `posedyn gap`
+writes them)."""
 
 from __future__ import annotations
 
@@ -37,14 +39,15 @@ def read_cut(path: str | os.PathLike) -> tuple[Cut, float, int | None]:
     return cut, rpm, steps
 
 
-def read_sle_cut(path: str | os.PathLike):
-    """The SLE cut of a cut file's `[sle]` section (None when the file has none)."""
+def read_sle_cut(path: str | os.PathLike) -> tuple[SleCut, float] | None:
+    """(SLE cut, offset in m added to the SLE) of a cut file's `[sle]` section (None when the file has none)."""
     p = read_params(path)
     if "sle" not in p:
         return None
     with reading(path, "cut file"):
         c, s = p["cut"], p["sle"]
         diameter = float(c["tool_diameter_mm"]) * 1e-3
+        offset_m = float(s.get("offset_um", 0.0)) * 1e-6
         return SleCut(
             teeth=int(c["teeth"]),
             kt_pa=float(c["kt_mpa"]) * 1e6,
@@ -55,4 +58,4 @@ def read_sle_cut(path: str | os.PathLike):
             axial_depth_m=float(s["axial_depth_mm"]) * 1e-3,
             feed_per_tooth_m=float(s["feed_per_tooth_mm"]) * 1e-3,
             milling=c.get("milling", "down"),
-        )
+        ), offset_m

@@ -10,6 +10,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from posedyn.errors import InputError
+from posedyn.io.atomic import write_text_atomic
 
 
 def read_params(path: str | os.PathLike) -> dict:
@@ -63,3 +64,27 @@ def reading(path: str | os.PathLike, what: str):
         raise InputError(f"this key in the {what}", got="missing", column=str(exc.args[0]), **where) from None
     except (TypeError, ValueError) as exc:
         raise InputError(f"numbers in the {what}", got=str(exc), **where) from None
+
+
+def write_params(path: str | os.PathLike, params: dict, comment: str = "") -> None:
+    """A parameter file from {table: {key: value}} (strings, numbers, booleans and lists of
+    numbers; `[meta]` first), `comment` as its leading # lines, atomically; read_params reads it
+    back to the same values."""
+    lines = [f"# {line}" for line in comment.splitlines()]
+    for table in sorted(params, key=lambda t: t != "meta"):
+        lines += ["", f"[{table}]"]
+        for key, value in params[table].items():
+            lines.append(f"{key} = {_toml_value(value, f'{table}.{key}')}")
+    write_text_atomic(path, "\n".join(lines).lstrip("\n") + "\n")
+
+
+def _toml_value(value, name: str) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return repr(value)
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
+    if isinstance(value, list) and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+        return "[" + ", ".join(repr(v) for v in value) + "]"
+    raise InputError("a string, number, boolean or list of numbers", got=type(value).__name__, column=name)

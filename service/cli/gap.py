@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import replace
 from pathlib import Path
 from typing import Optional
@@ -16,6 +17,7 @@ from posedyn.gap.twin_candidates import TWIN_EFFECTS, updated_twin
 from posedyn.io.atomic import write_text_atomic
 from posedyn.io.json_values import json_ready
 from posedyn.io.measurements import format_measurements, read_measurements
+from posedyn.io.params import read_params, write_params
 from posedyn.io.shipped import SHIPPED_TWIN
 from posedyn.io.twin_file import read_twin, write_twin
 from service.cli.common import console, resolve_cut
@@ -45,6 +47,7 @@ def gap(
     doc = json_ready(result.to_json())
     out.mkdir(parents=True, exist_ok=True)
     doc["updated_model"] = _write_updated_twin(out, result, None if model else twin_file, measured)
+    doc["updated_cut"] = _write_updated_cut(out, result, cut, measured)
     write_text_atomic(out / "gap.json", json.dumps(doc, indent=2, allow_nan=False) + "\n")
     write_text_atomic(out / "report.html", render(m, y, result, f"Simulation vs measurement: {measured.name}"))
     if as_json:
@@ -59,8 +62,13 @@ def gap(
         console.print(f"undecided between {' and '.join(a['candidates'])}: {a['separating_measurement']}")
     if not result.explained:
         console.print("no named effect explains the rest; the residual depends on: " + (", ".join(f"{c['variable']} ({c['quantity']})" for c in doc["residual_correlates"]) or "nothing measured"))
+        if result.discrepancy is not None:
+            d = result.discrepancy
+            console.print(f"map of the {d.quantity} residual over {' and '.join(d.axes)}: from {d.mean.min():.3g} to {d.mean.max():.3g} stds (report)")
     if doc["updated_model"]:
         console.print(f"updated twin (the named effects added): {doc['updated_model']}")
+    if doc["updated_cut"]:
+        console.print(f"updated cut (the named cutting and tool effects added): {doc['updated_cut']}")
     console.print(f"report: {out / 'report.html'}")
 
 
@@ -83,6 +91,49 @@ def _write_updated_twin(out: Path, result, twin_file: Optional[Path], measured: 
     path = out / "twin.toml"
     write_twin(path, replace(spec, params=updated_twin(spec.params, values)),
                source=f"{twin_file.name} with the gap workflow's named effects from {measured.name}", comment="\n".join(lines))
+    return str(path)
+
+
+#: Named effects that a cut file holds (its coefficients, its SLE offset).
+CUT_EFFECTS = ("cutting_coefficient_error", "tool_radius_error", "spindle_runout", "path_following_offset")
+
+
+def _write_updated_cut(out: Path, result, cut_file: Optional[Path], measured: Path) -> Optional[str]:
+    """DIR/cut.toml: the cut file with the named cutting and tool effects: k_t and k_n scaled by
+    (1 + s), and the SLE offset of the file's own cut (`[sle] offset_um`, which `posedyn sweep`
+    adds to its SLE) grown by minus the radius error, minus the runout's reach e (N / pi)
+    sin(pi / N) and the path offset at the cut's feed speed; None when no such effect was named.
+    (`load_compliance` belongs to the structure, not the cut: not written.)"""
+    named = {e["name"]: next(iter(e["parameters"].values())) for e in result.effects if e["name"] in CUT_EFFECTS}
+    if cut_file is None or not named:
+        return None
+    params = read_params(cut_file)
+    c = dict(params["cut"])
+    lines = [f"posedyn gap on {measured}: the cut {cut_file.name} with the named effects"]
+    if "cutting_coefficient_error" in named:
+        factor = 1.0 + named["cutting_coefficient_error"] / 100.0
+        c["kt_mpa"], c["kn_mpa"] = float(c["kt_mpa"]) * factor, float(c["kn_mpa"]) * factor
+        lines.append(f"cutting_coefficient_error: kt and kn x {factor:.4g}")
+    params["cut"] = c
+    offset_um = 0.0
+    if "sle" in params:
+        sle = dict(params["sle"])
+        teeth = int(c["teeth"])
+        speed_m_min = float(sle["feed_per_tooth_mm"]) * teeth * float(c["rpm"]) / 1000.0
+        shifts = {"tool_radius_error": -named.get("tool_radius_error", 0.0),
+                  "spindle_runout": -named.get("spindle_runout", 0.0) * teeth / math.pi * math.sin(math.pi / teeth),
+                  "path_following_offset": named.get("path_following_offset", 0.0) * speed_m_min}
+        for name, shift in shifts.items():
+            if name in named:
+                lines.append(f"{name}: SLE {shift:+.4g} um at this cut ({speed_m_min:.4g} m/min feed)")
+                offset_um += shift
+        sle["offset_um"] = float(sle.get("offset_um", 0.0)) + offset_um
+        params["sle"] = sle
+    meta = dict(params["meta"])
+    meta["source"] = f"{cut_file.name} with the gap workflow's named effects from {measured.name}"
+    params["meta"] = meta
+    path = out / "cut.toml"
+    write_params(path, params, comment="\n".join(lines))
     return str(path)
 
 

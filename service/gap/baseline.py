@@ -46,8 +46,8 @@ class Baseline:
         else:
             self.robot, self.params = load_twin(twin_file)
         self.cut = read_cut(cut_file)[0] if cut_file is not None else None
-        sle_cut = read_sle_cut(cut_file) if cut_file is not None else None
-        self.helix_deg = math.degrees(sle_cut.helix_rad) if sle_cut is not None else 0.0
+        sle = read_sle_cut(cut_file) if cut_file is not None else None  # its offset belongs to its own cut (feed speed, tool), not to a row's
+        self.helix_deg = math.degrees(sle[0].helix_rad) if sle is not None else 0.0
         self.absorber = read_absorber(absorber_file)
 
     def twin(self):

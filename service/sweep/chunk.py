@@ -44,7 +44,7 @@ class SweepContext:
     robot: Robot | None
     twin_params: TwinParameters | None
     schedule: ScheduleConfig
-    sle_cut: SleCut | None
+    sle_cut: tuple[SleCut, float] | None  # and the offset (m) the cut file adds to its SLE
 
 
 @lru_cache(maxsize=4)
@@ -113,7 +113,8 @@ def compute_chunk(spec_json: str, poses: PoseSet, grid_twin: str | None = None) 
     for i, result in zip(order, schedule_poses([found[i] for i in order], ctx.schedule)):
         rows[i].update(_result_columns(result))
         if ctx.sle_cut is not None:
-            rows[i]["sle_um"] = float(sle_m(found[i].dyn, ctx.sle_cut, ctx.schedule.rpm)[0]) * 1e6
+            sle_cut, offset_m = ctx.sle_cut
+            rows[i]["sle_um"] = float(sle_m(found[i].dyn, sle_cut, ctx.schedule.rpm, offset_m=offset_m)[0]) * 1e6
     if len(known_tunings()) > known:
         save_tuning_cache()
     return rows
