@@ -138,8 +138,15 @@ def test_an_mrf_temperature_law_with_another_reference_is_named_with_its_referen
 
 
 def test_an_effect_outside_the_library_is_unexplained_and_located():
+    """fn growing 3 % per 300 mm of x (10 stated stds): nothing claimed, x_mm among the residual's
+    correlates, and the smooth discrepancy map runs along x first, rising by more than 12 stds
+    across the workspace (the truth: 20)."""
     def right(r):
-        return not named(r) and not r.explained and any(c["variable"] == "x_mm" for c in r.correlates)
+        d = r.discrepancy
+        if d is None or list(d.axes)[0] != "x_mm":
+            return False
+        along_x = d.mean.mean(axis=tuple(range(1, d.mean.ndim)))
+        return not named(r) and not r.explained and any(c["variable"] == "x_mm" for c in r.correlates) and along_x[-1] - along_x[0] > 12.0
 
     assert score("outside", right) >= 18
 

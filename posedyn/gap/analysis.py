@@ -47,6 +47,8 @@ from scipy import stats
 from scipy.optimize import least_squares, minimize_scalar
 from scipy.special import gammaln
 
+from posedyn.gap.discrepancy import DiscrepancyMap, discrepancy_map
+
 #: A candidate must lower BIC by this much to be named (strong evidence, Kass and Raftery).
 MIN_BIC_DROP = 10.0
 #: Two candidates within this BIC of each other explain the data equally well.
@@ -483,6 +485,7 @@ class GapResult:
     prediction_after: np.ndarray
     noise: dict = field(default_factory=dict)  # {"model", "scale", "dof", "verdict"}
     held_out: dict = field(default_factory=dict)  # {"before", "after"}: chi-square per row on rows held out of the fit (5 folds)
+    discrepancy: DiscrepancyMap | None = None  # where the unexplained residual lives (None when explained)
 
     def to_json(self) -> dict:
         return {
@@ -498,6 +501,7 @@ class GapResult:
             "candidates": self.evidence_table,
             "ambiguous": self.ambiguous,
             "residual_correlates": self.correlates,
+            "discrepancy_map": self.discrepancy.to_json() if self.discrepancy is not None else None,
         }
 
 
@@ -597,6 +601,11 @@ def analyse(m: Measurements, baseline: np.ndarray, library: dict[str, CandidateE
         rms = float(np.sqrt(np.mean(after**2)))
         explained = max(noise.scale, rms) <= PLAUSIBLE_NOISE_SCALE and not residual_correlates(m, after, level=NOISE_P / max(_tests(m), 1))
     correlates = [] if explained else residual_correlates(m, after)
+    where = None
+    if not explained:  # a smooth map of what is left, for the quantity that misses most
+        counts = {q: np.sum(m.quantity == q) for q in np.unique(m.quantity)}
+        worst = max((q for q in counts if counts[q] >= 8), key=lambda q: float(np.mean(after[m.quantity == q] ** 2)), default=None)
+        where = discrepancy_map(m, after, str(worst)) if worst is not None else None
     return GapResult(
         effects=effects,
         rmse_before=float(np.sqrt(np.mean(before**2))),
@@ -611,6 +620,7 @@ def analyse(m: Measurements, baseline: np.ndarray, library: dict[str, CandidateE
         prediction_after=prediction,
         noise=dict(noise.to_json(), verdict=noise_verdict(noise)),
         held_out={"before": held_before, "after": current.cv_chi2_per_row},
+        discrepancy=where,
     )
 
 

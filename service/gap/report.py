@@ -35,6 +35,13 @@ def render(m, baseline: np.ndarray, result, title: str) -> str:
         parts.append("<p><b>The remaining residual depends on:</b> " + html.escape("; ".join(f"{c['variable']} ({c['quantity']} rows, Spearman rho {c['spearman_rho']:.2f}, p {c['p']:.2g})" for c in doc["residual_correlates"])) + "</p>")
     parts.append("<h2>Residuals</h2>")
     parts.append(html.figure(_residual_png(m, (m.value - baseline) / m.std, (m.value - result.prediction_after) / m.std), "Normalised residuals (value - prediction) / std, before and after"))
+    if result.discrepancy is not None:
+        d = result.discrepancy
+        follows = ", ".join(f"{v} ({r:.2g})" for v, r in sorted(zip(d.variables, d.relevance), key=lambda t: -t[1]))
+        parts.append("<h2>Where the rest lives</h2>")
+        parts.append(f"<p>A Gaussian process map of the {html.escape(d.quantity)} residual after the named effects (its scale {d.signal_std:.3g} stds, "
+                     f"leaving {d.noise_std:.3g}); relevance, spread over length scale, per variable: {html.escape(follows)}.</p>")
+        parts.append(html.figure(_map_png(d), f"Normalised {d.quantity} residual over {' and '.join(d.axes)} (others at their median)"))
     parts.append("<h2>Every candidate</h2>")
     parts.append(html.table(doc["candidates"], ("name", "eligible", "reason", "delta_bic", "cv_chi2_per_row", "chosen")))
     body = "\n".join(parts)
@@ -64,4 +71,25 @@ def _residual_png(m, before: np.ndarray, after: np.ndarray) -> bytes:
     axes[0].set_ylabel("(value - prediction) / std")
     axes[0].set_yscale("symlog", linthresh=3)
     axes[1].legend(fontsize=7)
+    return html.png(fig)
+
+
+def _map_png(d) -> bytes:
+    import matplotlib.pyplot as plt  # heavy (about 0.3 s): only when a figure is drawn
+
+    names = list(d.axes)
+    fig, ax = plt.subplots(figsize=(7, 4.2), dpi=90)
+    if len(names) == 1:
+        x = d.axes[names[0]]
+        ax.plot(x, d.mean, color="C0")
+        ax.fill_between(x, d.mean - 2 * d.std, d.mean + 2 * d.std, color="C0", alpha=0.2, label="+- 2 std")
+        ax.set_xlabel(names[0])
+        ax.set_ylabel("(value - prediction) / std")
+        ax.legend(fontsize=8)
+    else:
+        mesh = ax.pcolormesh(d.axes[names[0]], d.axes[names[1]], d.mean.T, shading="auto", cmap="RdBu_r",
+                             vmin=-np.max(np.abs(d.mean)), vmax=np.max(np.abs(d.mean)))
+        fig.colorbar(mesh, ax=ax, label="(value - prediction) / std")
+        ax.set_xlabel(names[0])
+        ax.set_ylabel(names[1])
     return html.png(fig)
