@@ -310,3 +310,51 @@ def test_two_joints_the_fn_rows_cannot_tell_apart_get_the_pose_to_measure_next()
         qp = np.array([m.conditions[f"model_q{k}_rad"][i] for k in range(1, 7)])
         fa_p, fb_p = fn(qp, a), fn(qp, b)
         assert all(abs(fa_p[k] / fb_p[k] - 1.0) < gap for k in fa_p.keys() & fb_p.keys())
+
+
+def test_a_physics_model_gets_the_named_twin_effects_written_into_its_prior(tmp_path):
+    """`posedyn gap --model MODEL_DIR --out DIR` with twin effects named writes DIR/model: the
+    physics model with its prior twin changed (joint factor, flange mass) and everything learned
+    kept, so its fn and k predictions move by exactly the changed/nominal twin ratio with which
+    the candidates corrected the model in the fit (zeta untouched); the model's cut comes along,
+    and the record names what was added."""
+    import math
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    from posedyn.io import read_modal_table
+    from posedyn.io.model_dir import load_model, save_model
+    from posedyn.io.twin_file import load_twin
+    from posedyn.posemodel import PoseModel
+    from posedyn.robot import direction_rows
+    from posedyn.robot.twin import twin_modes
+    from service.cli.gap import _write_updated_model
+    from service.gap.baseline import Baseline
+
+    root = Path(__file__).resolve().parents[1]
+    table = read_modal_table(root / "datasets/campaigns/seed003_twin_s1.csv")
+    model = PoseModel("physics", twin=load_twin()).fit(table.select_poses(list(range(0, 112, 7))))
+    save_model(model, tmp_path / "m")
+    (tmp_path / "m/cut.toml").write_text((root / "datasets/seeds/hou2023_cut.toml").read_text())
+    effects = [{"name": "flange_device", "parameters": {"mass_kg": 7.0}, "parameter_std": {"mass_kg": 0.2}},
+               {"name": "joint_stiffness_a2", "parameters": {"log2_factor": math.log2(0.8)}, "parameter_std": {"log2_factor": 0.01}}]
+    written = _write_updated_model(tmp_path / "gap", SimpleNamespace(effects=effects), None, tmp_path / "m", Path("meas.csv"))
+    assert written == str(tmp_path / "gap/model") and (tmp_path / "gap/model/cut.toml").exists()
+    updated = load_model(written)
+    assert "flange_device: mass_kg = 7" in updated.physics_["gap_effects"][0]
+
+    poses = table.poses.subset([3, 50, 101])
+    before, after = load_model(tmp_path / "m").predict_table(poses), updated.predict_table(poses)
+    robot, nominal = Baseline(model_dir=tmp_path / "m").twin()
+    changed = replace(nominal.scaled([1.0, 0.8, 1.0, 1.0, 1.0, 1.0]), flange_mass_kg=nominal.flange_mass_kg + 7.0)
+    q = np.radians(poses.joints_deg)
+    for p in range(len(poses)):
+        ratio = {}
+        for params, name in ((nominal, "nominal"), (changed, "changed")):
+            modes = twin_modes(robot, q[p], params)
+            ratio[name] = {(d, j): row for d in ("x", "y", "z") for j, row in enumerate(direction_rows(modes, d, nominal.robot_modes_per_direction), 1)}
+        for r in np.flatnonzero(before.pose_index == p):
+            key = (str(before.direction[r]), int(before.mode[r]))
+            assert after.fn_hz[r] == pytest.approx(before.fn_hz[r] * ratio["changed"][key][0] / ratio["nominal"][key][0], rel=1e-9)
+            assert after.k_n_per_m[r] == pytest.approx(before.k_n_per_m[r] * ratio["changed"][key][2] / ratio["nominal"][key][2], rel=1e-9)
+            assert after.zeta[r] == before.zeta[r]

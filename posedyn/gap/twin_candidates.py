@@ -18,6 +18,7 @@ joint angles as the context columns `model_q1_rad` .. `model_q6_rad` (the gap ba
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import replace
 
@@ -48,6 +49,21 @@ def updated_twin(params: TwinParameters, values: dict) -> TwinParameters:
     """The twin with named twin candidates applied (the flange mass as mounted in the device rows)."""
     scale, flange_kg = twin_changes(values)
     return replace(params.scaled(scale), flange_mass_kg=params.flange_mass_kg + flange_kg)
+
+
+def updated_pose_model(model, values: dict, note: str):
+    """A copy of a fitted physics pose model whose prior twin carries the named twin candidates
+    (`updated_twin` on the prior's parameters; the fitted stiffness scales and the learned
+    residual GPs unchanged), so its ln predictions of fn and k move by exactly ln(changed twin /
+    nominal twin), as the candidates corrected the model's predictions; `note` is kept in its
+    physics record (`gap_effects`)."""
+    prior = model.prior_model_
+    params = updated_twin(prior.params, values)
+    out = copy.copy(model)
+    out.prior_model_ = replace(prior, params=params)
+    out.twin = (prior.robot, params)
+    out.physics_ = dict(model.physics_, gap_effects=list(model.physics_.get("gap_effects", [])) + [note])
+    return out
 
 
 def twin_candidates(robot: Robot, params: TwinParameters) -> dict[str, CandidateEffect]:

@@ -13,10 +13,11 @@ from rich.markup import escape
 
 from posedyn.errors import InputError
 from posedyn.gap import LIBRARY, analyse
-from posedyn.gap.twin_candidates import TWIN_EFFECTS, updated_twin
+from posedyn.gap.twin_candidates import TWIN_EFFECTS, updated_pose_model, updated_twin
 from posedyn.io.atomic import write_text_atomic
 from posedyn.io.json_values import json_ready
 from posedyn.io.measurements import format_measurements, read_measurements
+from posedyn.io.model_dir import load_model, save_model
 from posedyn.io.params import read_params, write_params
 from posedyn.io.shipped import SHIPPED_TWIN
 from posedyn.io.twin_file import read_twin, write_twin
@@ -46,7 +47,7 @@ def gap(
     result = analyse(m, y, library=baseline.library())
     doc = json_ready(result.to_json())
     out.mkdir(parents=True, exist_ok=True)
-    doc["updated_model"] = _write_updated_twin(out, result, None if model else twin_file, measured)
+    doc["updated_model"] = _write_updated_model(out, result, None if model else twin_file, model, measured)
     doc["updated_cut"] = _write_updated_cut(out, result, cut, measured)
     write_text_atomic(out / "gap.json", json.dumps(doc, indent=2, allow_nan=False) + "\n")
     write_text_atomic(out / "report.html", render(m, y, result, f"Simulation vs measurement: {measured.name}"))
@@ -66,31 +67,42 @@ def gap(
             d = result.discrepancy
             console.print(f"map of the {d.quantity} residual over {' and '.join(d.axes)}: from {d.mean.min():.3g} to {d.mean.max():.3g} stds (report)")
     if doc["updated_model"]:
-        console.print(f"updated twin (the named effects added): {doc['updated_model']}")
+        console.print(f"updated {'model' if model else 'twin'} (the named effects added): {doc['updated_model']}")
     if doc["updated_cut"]:
         console.print(f"updated cut (the named cutting and tool effects added): {doc['updated_cut']}")
     console.print(f"report: {out / 'report.html'}")
 
 
-def _write_updated_twin(out: Path, result, twin_file: Optional[Path], measured: Path) -> Optional[str]:
-    """DIR/twin.toml: the baseline twin with the named effects that act through it (joint
-    stiffnesses scaled, a device's fitted mass on the flange), for `posedyn sweep --twin`, `plan
-    --twin`, `twin modes --twin`; None when no such effect was named or the baseline is a trained
-    model."""
+def _write_updated_model(out: Path, result, twin_file: Optional[Path], model_dir: Optional[Path], measured: Path) -> Optional[str]:
+    """The baseline with the named effects that act through the twin (joint stiffnesses scaled,
+    a device's fitted mass on the flange): DIR/twin.toml for a twin baseline (for `posedyn
+    schedule/sweep/plan/twin modes --twin`), DIR/model/ for a physics model (its prior twin
+    changed, `posedyn.gap.twin_candidates.updated_pose_model`; for every command that takes a
+    MODEL_DIR, its cut.toml copied); None when no such effect was named or the model has no twin."""
     through = {e["name"]: e for e in result.effects if e["name"] in TWIN_EFFECTS}
-    if twin_file is None or not through:
+    if not through:
         return None
-    spec = read_twin(twin_file)
     values = {name: next(iter(e["parameters"].values())) for name, e in through.items()}
-    lines = [f"posedyn gap on {measured}: the twin {twin_file.name} with the named effects"]
+    lines = []
     for name, e in through.items():
         (key, value), = e["parameters"].items()
         std = e["parameter_std"][key]
         lines.append(f"flange_device: mass_kg = {value:.4g} +- {std:.2g} (the device as mounted in the campaign's device = 1 rows)" if name == "flange_device"
                      else f"{name}: stiffness x {2.0**value:.4g} (log2 {value:.4g} +- {std:.2g})")
+    if model_dir is not None:
+        model = load_model(model_dir)
+        if not (model.physics_ or {}).get("used"):
+            return None
+        path = out / "model"
+        save_model(updated_pose_model(model, values, f"posedyn gap on {measured.name}: " + "; ".join(lines)), path)
+        if (model_dir / "cut.toml").exists():
+            write_text_atomic(path / "cut.toml", (model_dir / "cut.toml").read_text(encoding="utf-8"))
+        return str(path)
+    spec = read_twin(twin_file)
     path = out / "twin.toml"
     write_twin(path, replace(spec, params=updated_twin(spec.params, values)),
-               source=f"{twin_file.name} with the gap workflow's named effects from {measured.name}", comment="\n".join(lines))
+               source=f"{twin_file.name} with the gap workflow's named effects from {measured.name}",
+               comment="\n".join([f"posedyn gap on {measured}: the twin {twin_file.name} with the named effects"] + lines))
     return str(path)
 
 

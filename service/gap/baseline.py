@@ -51,10 +51,15 @@ class Baseline:
         self.absorber = read_absorber(absorber_file)
 
     def twin(self):
-        """(Robot, TwinParameters) behind the predictions, or None (a model without a twin)."""
+        """(Robot, TwinParameters) behind the predictions, or None (a model without a twin): the
+        twin file's, or a physics model's prior twin as it uses it (its fitted stiffness scales
+        applied)."""
         if self.model is None:
             return self.robot, self.params
-        return self.model.twin
+        if not (self.model.physics_ or {}).get("used"):
+            return None
+        prior = self.model.prior_model_
+        return prior.robot, prior.params.scaled(prior.scales)
 
     def library(self) -> dict:
         """The candidates for this baseline: the library, and where a twin is behind the
