@@ -2,17 +2,20 @@
 datasets/seeds/hou2023_mrf_absorber.toml) and the active-damping actuator (`kind =
 "active_damping"`, as datasets/seeds/sahu2024_active_damping.toml), a host mode with its cut and
 uncertainty (`kind = "host_and_cut"`, as datasets/seeds/dogan2024_host_milling.toml). None gives
-the defaults (seed 004's absorber, seed 000's actuator)."""
+the defaults (seed 004's absorber, seed 000's actuator). An absorber file may also hold `[mrf]
+zeta_per_tesla` (measured extra damping) and a `[drive]` table overriding `CoilDrive`'s assumed
+drive and thermal values (e.g. the modulus temperature law); `posedyn gap --out` writes both."""
 
 from __future__ import annotations
 
 import json
 import logging
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 from absorber.active_damping import Actuator, ControlConfig
+from absorber.coil_dynamics import CoilDrive
 from absorber.mrf import MRFAbsorber
 from absorber.robust import HostUncertainty
 from absorber.tuning import Host, known_tunings, remember_tunings
@@ -33,9 +36,25 @@ def read_absorber(path: str | os.PathLike | None) -> MRFAbsorber:
             mass_kg=a["mass_kg"], r1_m=a["r1_m"], r2_m=a["r2_m"], l1_m=a["l1_m"], w1_m=a["w1_m"], h1_m=a["h1_m"], h2_m=a["h2_m"],
             g2_pa=a["elastomer_shear_modulus_pa"], g0_pa=m["g0_pa"], ginf_pa=m["ginf_pa"], a1=m["a1"], a2=m["a2"],
             field_min_t=f["min_mt"] * 1e-3, field_max_t=f["max_mt"] * 1e-3,
-            **{k: m[k] for k in ("loss_factor_mrf",) if k in m},
+            **{k: m[k] for k in ("loss_factor_mrf", "zeta_per_tesla") if k in m},
             **{k: a[k] for k in ("loss_factor_elastomer",) if k in a},
         )
+
+
+def read_drive(path: str | os.PathLike | None) -> CoilDrive:
+    """The coil drive of an absorber file: `CoilDrive`'s assumed defaults, with the values of an
+    optional `[drive]` table (its field names, e.g. the fluid's modulus temperature law
+    `modulus_tempco_per_k`, `modulus_reference_c` as `posedyn gap` measures them)."""
+    if path is None:
+        return CoilDrive()
+    p = read_params(path)
+    table = p.get("drive", {})
+    known = {f.name for f in fields(CoilDrive)}
+    for key in table:
+        if key not in known:
+            raise InputError("a [drive] key among " + ", ".join(sorted(known)), got=key, file=str(Path(path)), column=f"drive.{key}")
+    with reading(path, "absorber file"):
+        return CoilDrive(**{k: float(v) for k, v in table.items()})
 
 
 def read_actuator(path: str | os.PathLike | None) -> ControlConfig:

@@ -51,6 +51,7 @@ class MRFAbsorber:
     field_max_t: float = 0.6
     loss_factor_mrf: float = 0.15
     loss_factor_elastomer: float = 0.12
+    zeta_per_tesla: float = 0.0  # damping the loss factors miss, growing with the field (as `posedyn gap` measures it: mrf_loss_modulus)
 
     def __post_init__(self):
         for name in ("mass_kg", "r2_m", "l1_m", "w1_m", "h1_m", "h2_m", "g2_pa", "g0_pa", "ginf_pa", "a1", "a2"):
@@ -105,10 +106,11 @@ class MRFAbsorber:
         return float(self.frequency_for_modulus(self.storage_modulus_pa(field_t)))
 
     def damping_ratio(self, field_t: float) -> float:
-        """Equivalent viscous damping ratio from the loss factors (assumption; see the module)."""
+        """Equivalent viscous damping ratio from the loss factors (assumption; see the module),
+        plus a measured zeta_per_tesla x B."""
         k1 = self._mrf_stiffness(self.storage_modulus_pa(field_t))
         k2 = self.elastomer_stiffness_n_per_m
-        return (self.loss_factor_mrf * k1 + self.loss_factor_elastomer * k2) / (2.0 * (k1 + k2))
+        return (self.loss_factor_mrf * k1 + self.loss_factor_elastomer * k2) / (2.0 * (k1 + k2)) + self.zeta_per_tesla * field_t
 
     @property
     def range_hz(self) -> tuple[float, float]:

@@ -162,3 +162,28 @@ def test_bad_measurement_file_names_row_and_column(tmp_path):
     bad.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg,quantity,direction,mode,value,std\np,1400,0,600,0,fn_hz,x,1,13.2,0.05\np,1400,0,600,0,fn_hz,x,1,abc,0.05\n")
     out = subprocess.run([sys.executable, "-c", "from service.cli import main; main()", "gap", "--measured", str(bad), "--twin", "--out", str(tmp_path / "o")], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert out.returncode == 2 and "bad.csv" in out.stderr and "row 2" in out.stderr and "value" in out.stderr
+
+
+def test_named_fluid_effects_are_written_into_the_absorber_file_and_reproduce_the_fit(baseline, tmp_path):
+    """The MRF modulus falling as exp(-a (T - 20 C)) (through the absorber model: the fluid's
+    shear stiffness only) and extra damping 0.1 x B hidden in the absorber rows: both named, a
+    within 10 %, and DIR/absorber.toml carries them ([drive] modulus law, [mrf] zeta_per_tesla)
+    so that the gap baseline on the written file predicts exactly what the fit did, and `posedyn
+    plan`'s drive heats the fluid with the measured law."""
+    from absorber.files import read_drive
+    from service.cli.gap import _write_updated_absorber
+
+    design = campaign_design(7)
+    design = design.take(np.flatnonzero(np.isin(design.quantity, ("absorber_fn_hz", "absorber_zeta"))))
+    y, context = baseline.predict(design)
+    library = baseline.library()
+    hidden = {"mrf_temperature_drift": {"modulus_drop_per_mk": 6.0, "reference_c": 20.0}, "mrf_loss_modulus": {"zeta_per_tesla": 0.1}}
+    m = replace(hide(design, y, context, hidden, 7, library=library), conditions=context.conditions)
+    result = analyse(m, y, library=library)
+    fitted = {e["name"]: e["parameters"] for e in result.effects}
+    assert sorted(fitted) == sorted(hidden) and result.explained
+    assert fitted["mrf_temperature_drift"]["modulus_drop_per_mk"] == pytest.approx(6.0, rel=0.1)
+    written = _write_updated_absorber(tmp_path, result, None, Path("meas.csv"))
+    updated = Baseline(twin_file=ROOT / "datasets/robots/kr_r2700_twin.toml", absorber_file=Path(written))
+    assert np.allclose(updated.predict(design)[0], result.prediction_after, rtol=1e-9, atol=0)
+    assert read_drive(written).modulus_tempco_per_k == pytest.approx(fitted["mrf_temperature_drift"]["modulus_drop_per_mk"] * 1e-3, rel=1e-12)

@@ -11,6 +11,7 @@ from typing import Optional
 import typer
 from rich.markup import escape
 
+from absorber.coil_dynamics import CoilDrive
 from posedyn.errors import InputError
 from posedyn.gap import LIBRARY, analyse
 from posedyn.gap.twin_candidates import TWIN_EFFECTS, updated_pose_model, updated_twin
@@ -19,7 +20,7 @@ from posedyn.io.json_values import json_ready
 from posedyn.io.measurements import format_measurements, read_measurements
 from posedyn.io.model_dir import load_model, save_model
 from posedyn.io.params import read_params, write_params
-from posedyn.io.shipped import SHIPPED_TWIN
+from posedyn.io.shipped import SEED004_ABSORBER, SHIPPED_TWIN
 from posedyn.io.twin_file import read_twin, write_twin
 from service.cli.common import console, resolve_cut
 from service.gap.baseline import Baseline, generate_measurements
@@ -49,6 +50,7 @@ def gap(
     out.mkdir(parents=True, exist_ok=True)
     doc["updated_model"] = _write_updated_model(out, result, None if model else twin_file, model, measured)
     doc["updated_cut"] = _write_updated_cut(out, result, cut, measured)
+    doc["updated_absorber"] = _write_updated_absorber(out, result, absorber, measured)
     write_text_atomic(out / "gap.json", json.dumps(doc, indent=2, allow_nan=False) + "\n")
     write_text_atomic(out / "report.html", render(m, y, result, f"Simulation vs measurement: {measured.name}"))
     if as_json:
@@ -70,6 +72,8 @@ def gap(
         console.print(f"updated {'model' if model else 'twin'} (the named effects added): {doc['updated_model']}")
     if doc["updated_cut"]:
         console.print(f"updated cut (the named cutting and tool effects added): {doc['updated_cut']}")
+    if doc["updated_absorber"]:
+        console.print(f"updated absorber (the named fluid effects added): {doc['updated_absorber']}")
     console.print(f"report: {out / 'report.html'}")
 
 
@@ -145,6 +149,39 @@ def _write_updated_cut(out: Path, result, cut_file: Optional[Path], measured: Pa
     meta["source"] = f"{cut_file.name} with the gap workflow's named effects from {measured.name}"
     params["meta"] = meta
     path = out / "cut.toml"
+    write_params(path, params, comment="\n".join(lines))
+    return str(path)
+
+
+def _write_updated_absorber(out: Path, result, absorber_file: Optional[Path], measured: Path) -> Optional[str]:
+    """DIR/absorber.toml: the absorber file (default seed 004's) with the named fluid effects:
+    `mrf_temperature_drift` as the drive's modulus temperature law (`[drive]
+    modulus_tempco_per_k`, `modulus_reference_c`: what `posedyn plan` and the service's
+    trajectories heat the fluid with, and what `posedyn gap` predicts absorber_fn_hz rows at
+    their temperature_c with), `mrf_loss_modulus` as `[mrf] zeta_per_tesla` (the absorber's
+    damping at every field, in every schedule). None when neither was named.
+    (`absorber_gravity_stiffness` depends on the mounting angle, which no command takes: not written.)"""
+    named = {e["name"]: e["parameters"] for e in result.effects if e["name"] in ("mrf_temperature_drift", "mrf_loss_modulus")}
+    if not named:
+        return None
+    source = absorber_file if absorber_file is not None else SEED004_ABSORBER
+    params = {k: dict(v) for k, v in read_params(source).items()}
+    lines = [f"posedyn gap on {measured}: the absorber {source.name} with the named effects"]
+    if "mrf_temperature_drift" in named:
+        law = named["mrf_temperature_drift"]
+        a, reference_c = law["modulus_drop_per_mk"] * 1e-3, law["reference_c"]
+        lines.append(f"mrf_temperature_drift: G1 x exp(-{a:.4g} (T - {reference_c:.4g} C))")
+        drive = params.setdefault("drive", {})
+        if "modulus_tempco_per_k" in drive:  # on top of the file's own law: exp(-a1 (T - T1)) exp(-a2 (T - T2)) = exp(-(a1 + a2)(T - T0))
+            a1, t1 = float(drive["modulus_tempco_per_k"]), float(drive.get("modulus_reference_c", CoilDrive().modulus_reference_c))
+            reference_c = (a1 * t1 + a * reference_c) / (a1 + a) if a1 + a else t1
+            a = a1 + a
+        drive["modulus_tempco_per_k"], drive["modulus_reference_c"] = a, reference_c
+    if "mrf_loss_modulus" in named:
+        params["mrf"]["zeta_per_tesla"] = float(params["mrf"].get("zeta_per_tesla", 0.0)) + named["mrf_loss_modulus"]["zeta_per_tesla"]
+        lines.append(f"mrf_loss_modulus: damping ratio + {named['mrf_loss_modulus']['zeta_per_tesla']:.4g} x B (T)")
+    params["meta"]["source"] = f"{source.name} with the gap workflow's named effects from {measured.name}"
+    path = out / "absorber.toml"
     write_params(path, params, comment="\n".join(lines))
     return str(path)
 

@@ -12,9 +12,8 @@ import numpy as np
 import typer
 
 from absorber.chain import ScheduleConfig, absorber_depths_m, depth_weight, schedule_poses, table_pose_modes
-from absorber.coil_dynamics import CoilDrive
 from absorber.field_plan import FieldPlanner, simulate, step_schedule
-from absorber.files import read_absorber
+from absorber.files import read_absorber, read_drive
 from posedyn.io.atomic import write_text_atomic
 from posedyn.io.cut import read_cut
 from posedyn.io.modal_csv import read_tool_path
@@ -50,7 +49,7 @@ def plan(
     back = back.ravel()
     target = np.array([entries[u].absorber.target_hz for u in back])
     weight = np.array([weights[u] for u in back])
-    coil, drive = config.coil, CoilDrive()
+    coil, drive = config.coil, read_drive(absorber)
     result = FieldPlanner(len(time_s) - 1, config.absorber, coil, drive).solve(time_s, target, weight)
     check = simulate(coil, drive, config.absorber, time_s, result.voltage_v)
     baseline = step_schedule(coil, drive, config.absorber, time_s, target)

@@ -16,13 +16,16 @@ from pathlib import Path
 
 import numpy as np
 
-from absorber.files import read_absorber
+from absorber.coil_dynamics import absorber_frequency
+from absorber.files import read_absorber, read_drive
+from absorber.gap_candidates import absorber_candidates
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.errors import InputError
 from posedyn.gap import LIBRARY, Measurements, predict
 from posedyn.gap.twin_candidates import MODEL_JOINT_COLUMNS, twin_candidates
 from posedyn.io.cut import read_cut, read_sle_cut
 from posedyn.io.model_dir import load_model
+from posedyn.io.params import read_params
 from posedyn.io.twin_file import load_twin
 from posedyn.robot import GridPose, direction_rows, pose_modes, tool_pose
 from posedyn.sle import SleCut, mean_normal_force_n, sle_m
@@ -49,6 +52,8 @@ class Baseline:
         sle = read_sle_cut(cut_file) if cut_file is not None else None  # its offset belongs to its own cut (feed speed, tool), not to a row's
         self.helix_deg = math.degrees(sle[0].helix_rad) if sle is not None else 0.0
         self.absorber = read_absorber(absorber_file)
+        # the fluid's modulus temperature law, where the absorber file states one ([drive], as `posedyn gap` writes it)
+        self.drive = read_drive(absorber_file) if absorber_file is not None and "modulus_tempco_per_k" in read_params(absorber_file).get("drive", {}) else None
 
     def twin(self):
         """(Robot, TwinParameters) behind the predictions, or None (a model without a twin): the
@@ -62,14 +67,15 @@ class Baseline:
         return prior.robot, prior.params.scaled(prior.scales)
 
     def library(self) -> dict:
-        """The candidates for this baseline: the library, and where a twin is behind the
-        predictions the candidates that act through it (`posedyn.gap.twin_candidates`), which then
-        replace the surrogate `device_mass` (the twin's flange mass moves fn and k together)."""
+        """The candidates for this baseline: the library with the MRF temperature law through the
+        absorber model (`absorber.gap_candidates`), and where a twin is behind the predictions the
+        candidates that act through it (`posedyn.gap.twin_candidates`), which then replace the
+        surrogate `device_mass` (the twin's flange mass moves fn and k together)."""
+        out = dict(LIBRARY, **absorber_candidates(self.absorber, self.drive))
         twin = self.twin()
-        if twin is None:
-            return dict(LIBRARY)
-        out = {k: v for k, v in LIBRARY.items() if k != "device_mass"}
-        out.update(twin_candidates(*twin))
+        if twin is not None:
+            del out["device_mass"]
+            out.update(twin_candidates(*twin))
         return out
 
     def joint_angles(self, m: Measurements) -> dict:
@@ -133,7 +139,13 @@ class Baseline:
                 field_t = m.column("field_mt")[i] * 1e-3
                 if not np.isfinite(field_t):
                     raise InputError("a field_mt for an absorber row", row=i + 1, column="field_mt")
-                y[i] = self.absorber.natural_frequency_hz(field_t) if q == "absorber_fn_hz" else self.absorber.damping_ratio(field_t)
+                temperature_c = m.column("temperature_c")[i]
+                if q == "absorber_zeta":
+                    y[i] = self.absorber.damping_ratio(field_t)
+                elif self.drive is not None and np.isfinite(temperature_c):
+                    y[i] = float(absorber_frequency(self.absorber, self.drive, field_t, temperature_c))
+                else:
+                    y[i] = self.absorber.natural_frequency_hz(field_t)
             elif q == "critical_depth_mm":
                 if not np.isfinite(m.column("rpm")[i]):
                     raise InputError("an rpm for a critical_depth_mm row", row=i + 1, column="rpm")
@@ -229,11 +241,12 @@ def campaign_poses(m: Measurements, rows: list[int]) -> PoseSet:
 def generate_measurements(baseline: Baseline, hidden: dict, seed: int = 0, poses: int = 10, unknown=None) -> Measurements:
     """A campaign over random poses of the seed 003 workspace with every condition the library
     depends on varied independently, the named effects `hidden` ({name: {parameter: value}})
-    applied to the baseline, and Gaussian noise (NOISE). `unknown(m, y) -> y` hides an effect
+    applied to the baseline (the MRF temperature law through the absorber model), and Gaussian
+    noise (NOISE). `unknown(m, y) -> y` hides an effect
     that is not in the library (for tests)."""
     design = campaign_design(seed, poses)
     y, with_context = baseline.predict(design)
-    return hide(design, y, with_context, hidden, seed, unknown)
+    return hide(design, y, with_context, hidden, seed, unknown, library=dict(LIBRARY, **absorber_candidates(baseline.absorber, baseline.drive)))
 
 
 def campaign_design(seed: int = 0, poses: int = 10) -> Measurements:
@@ -273,11 +286,13 @@ def campaign_design(seed: int = 0, poses: int = 10) -> Measurements:
     )
 
 
-def hide(design: Measurements, y: np.ndarray, with_context: Measurements, hidden: dict, seed: int = 0, unknown=None) -> Measurements:
-    """Measured values: the baseline y with the hidden effects applied, plus noise (seeded)."""
+def hide(design: Measurements, y: np.ndarray, with_context: Measurements, hidden: dict, seed: int = 0, unknown=None, library: dict | None = None) -> Measurements:
+    """Measured values: the baseline y with the hidden effects (of `library`, default the
+    library's surrogates) applied, plus noise (seeded)."""
+    library = LIBRARY if library is None else library
     names_hidden = tuple(hidden)
-    theta = np.array([hidden[n][p.name] for n in names_hidden for p in LIBRARY[n].parameters])
-    truth = predict(names_hidden, theta, y, with_context) if names_hidden else y
+    theta = np.array([hidden[n][p.name] for n in names_hidden for p in library[n].parameters])
+    truth = predict(names_hidden, theta, y, with_context, library) if names_hidden else y
     if unknown is not None:
         truth = unknown(with_context, truth)
     m = design

@@ -12,9 +12,8 @@ import numpy as np
 
 from absorber.chain import ScheduleConfig, schedule_entries
 from absorber.coil import Coil
-from absorber.coil_dynamics import CoilDrive
 from absorber.field_plan import FieldPlanner
-from absorber.files import read_absorber, read_actuator
+from absorber.files import read_absorber, read_actuator, read_drive
 from posedyn.errors import InputError
 from posedyn.io.cut import read_cut
 from posedyn.io.model_dir import load_model
@@ -54,6 +53,7 @@ class ScheduleEngine:
         self.model_version = model_version(self.model.training_hash_, robust_samples, tools, pivot_mm)
         self.cut, self.rpm, self.steps = read_cut(cut)
         self.absorber = read_absorber(absorber)
+        self.drive = read_drive(absorber)
         self.control = read_actuator(actuator)
         self.robot = self.model.twin[0] if self.model.twin is not None else None
         if self.robot is None:  # the one rule: the model's twin, else the given one, else the shipped twin
@@ -77,8 +77,8 @@ class ScheduleEngine:
 
     def trajectory(self, targets_hz: list[float], times_s: list[float]) -> dict:
         """The coil's voltage, current and field through the targets at the times
-        (`absorber.field_plan`; the service's absorber, the default coil and drive)."""
-        coil, drive = Coil(), CoilDrive()
+        (`absorber.field_plan`; the service's absorber and its file's drive, the default coil)."""
+        coil, drive = Coil(), self.drive
         plan = FieldPlanner(len(times_s) - 1, self.absorber, coil, drive).solve(times_s, targets_hz)
         return {"voltage_v": plan.voltage_v.tolist(), "current_a": plan.current_a.tolist(), "field_mt": (1e3 * plan.field_t).tolist(),
                 "temperature_c": plan.temperature_c.tolist(), "frequency_hz": plan.frequency_hz.tolist(), "solver": plan.solver}
