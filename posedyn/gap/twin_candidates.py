@@ -31,24 +31,28 @@ from posedyn.robot.twin import twin_modes
 
 MODEL_JOINT_COLUMNS = tuple(f"model_q{j}_rad" for j in range(1, 7))
 #: The candidates that act through the twin.
-TWIN_EFFECTS = tuple(f"joint_stiffness_a{j}" for j in range(1, 7)) + ("flange_device",)
+TWIN_EFFECTS = tuple(f"joint_stiffness_a{j}" for j in range(1, 7)) + ("flange_device", "gravity_softening")
 
 
-def twin_changes(values: dict) -> tuple[np.ndarray, float]:
-    """(joint stiffness factors (6,), flange mass kg) of named twin candidates {name: parameter}."""
-    scale, flange_kg = np.ones(6), 0.0
+def twin_changes(values: dict) -> tuple[np.ndarray, float, float]:
+    """(joint stiffness factors (6,), flange mass kg, added gravity softening per kN m) of named
+    twin candidates {name: parameter}."""
+    scale, flange_kg, softening = np.ones(6), 0.0, 0.0
     for name, value in values.items():
         if name == "flange_device":
             flange_kg = float(value)
+        elif name == "gravity_softening":
+            softening = float(value)
         else:
             scale[int(name.removeprefix("joint_stiffness_a")) - 1] = 2.0 ** float(value)
-    return scale, flange_kg
+    return scale, flange_kg, softening
 
 
 def updated_twin(params: TwinParameters, values: dict) -> TwinParameters:
     """The twin with named twin candidates applied (the flange mass as mounted in the device rows)."""
-    scale, flange_kg = twin_changes(values)
-    return replace(params.scaled(scale), flange_mass_kg=params.flange_mass_kg + flange_kg)
+    scale, flange_kg, softening = twin_changes(values)
+    return replace(params.scaled(scale), flange_mass_kg=params.flange_mass_kg + flange_kg,
+                   gravity_softening_per_knm=params.gravity_softening_per_knm + softening)
 
 
 def updated_pose_model(model, values: dict, note: str):
@@ -72,19 +76,19 @@ def twin_candidates(robot: Robot, params: TwinParameters) -> dict[str, Candidate
     `device` = 1, at the twin's flange offset, kg 0-200)."""
     cache: dict = {}
 
-    def table(q: tuple, scale: tuple, flange_kg: float) -> dict:
-        key = (q, scale, round(flange_kg, 12))
+    def table(q: tuple, scale: tuple, flange_kg: float, softening: float) -> dict:
+        key = (q, scale, round(flange_kg, 12), round(softening, 14))
         if key not in cache:
             p = params.scaled(np.asarray(scale))
-            if flange_kg:
-                p = replace(p, flange_mass_kg=p.flange_mass_kg + flange_kg)
+            if flange_kg or softening:
+                p = replace(p, flange_mass_kg=p.flange_mass_kg + flange_kg, gravity_softening_per_knm=p.gravity_softening_per_knm + softening)
             modes = twin_modes(robot, np.asarray(q), p)
             if len(cache) > 20000:
                 cache.clear()
             cache[key] = {(d, j): row for d in ("x", "y", "z") for j, row in enumerate(direction_rows(modes, d, params.robot_modes_per_direction), 1)}
         return cache[key]
 
-    def ratio(m: Measurements, scale, flange_kg: float) -> np.ndarray:
+    def ratio(m: Measurements, scale, flange_kg: float, softening: float) -> np.ndarray:
         """changed / nominal twin for every fn_hz and k_n_per_m row (1 elsewhere)."""
         out = np.ones(len(m))
         q_all = np.column_stack([m.column(c) for c in MODEL_JOINT_COLUMNS])
@@ -94,7 +98,7 @@ def twin_candidates(robot: Robot, params: TwinParameters) -> dict[str, Candidate
         for i in np.flatnonzero(modal):
             q = tuple(np.round(q_all[i], 12))
             key = (str(m.direction[i]), int(m.mode[i]))
-            nominal, changed = table(q, (1.0,) * 6, 0.0), table(q, scale, float(flange[i]))
+            nominal, changed = table(q, (1.0,) * 6, 0.0, 0.0), table(q, scale, float(flange[i]), softening)
             if key in nominal and key in changed:
                 column = 0 if m.quantity[i] == "fn_hz" else 2
                 with np.errstate(all="ignore"):
@@ -148,6 +152,11 @@ def twin_candidates(robot: Robot, params: TwinParameters) -> dict[str, Candidate
         return {(d, j): row[0] for d in ("x", "y") for j, row in enumerate(direction_rows(modes, d, params.robot_modes_per_direction), 1)}
 
     out = {f"joint_stiffness_a{j + 1}": joint(j) for j in range(6)}
+    out["gravity_softening"] = CandidateEffect(
+        "gravity_softening", "the joints soften under the gravity torque they carry (k / (1 + c |tau_g| / 1 kN m), the modes recomputed at every pose)",
+        "seed 003 section 2 (load-dependent joint stiffness); Dumas et al. 2011", ("fn_hz", "k_n_per_m"), (),
+        (Parameter("softening_per_knm", 0.02, -0.15, 2.0),), lambda y, m, t: combine(y, m, {"gravity_softening": t}), combine=combine,
+        fit_quantities=("fn_hz",), separate=separate)
     out["flange_device"] = CandidateEffect(
         "flange_device", "a device mounted on the flange (the twin's modes recomputed with its mass: fn and modal stiffness change)",
         "seed 000 section 2 and Fig. 2 (actuator mass lowers and splits the robot modes)",

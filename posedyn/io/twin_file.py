@@ -1,5 +1,6 @@
 """Robot-twin parameter files (TOML, `kind = "robot_twin"`): `[robot] urdf, payload_kg`;
-`[joints] stiffness_nm_per_rad = [six values]`; `[modes] zeta, robot_modes_per_direction`;
+`[joints] stiffness_nm_per_rad = [six values]`, optional `gravity_softening_per_knm` (joint
+stiffness k / (1 + c |gravity torque| / 1 kN m)); `[modes] zeta, robot_modes_per_direction`;
 optional `[flange] mass_kg, offset_m = [x, y, z]` (a device on the flange, e.g. written by the
 gap workflow); `[[spindle_modes]] direction, fn_hz, k_n_per_m, zeta`. The one place a twin file
 becomes a Robot and its TwinParameters, and the one place one is written (`write_twin`)."""
@@ -42,6 +43,7 @@ def read_twin(path: str | os.PathLike) -> TwinSpec:
             spindle_modes={d: tuple(m) for d, m in spindle.items()},
             flange_mass_kg=float(flange.get("mass_kg", 0.0)),
             flange_mass_offset_m=tuple(float(v) for v in flange.get("offset_m", TwinParameters().flange_mass_offset_m)),
+            gravity_softening_per_knm=float(p["joints"].get("gravity_softening_per_knm", 0.0)),
         )
         return TwinSpec(urdf=urdf, payload_kg=float(robot["payload_kg"]), params=params)
 
@@ -54,7 +56,8 @@ def write_twin(path: str | os.PathLike, spec: TwinSpec, source: str, comment: st
     lines = [f"# {line}" for line in comment.splitlines()] + [
         "", "[meta]", 'kind = "robot_twin"', f"source = {_toml_string(source)}", "",
         "[robot]", f"urdf = {_toml_string(urdf)}", f"payload_kg = {spec.payload_kg!r}", "",
-        "[joints]", f"stiffness_nm_per_rad = [{', '.join(repr(float(k)) for k in p.joint_stiffness_nm_per_rad)}]", "",
+        "[joints]", f"stiffness_nm_per_rad = [{', '.join(repr(float(k)) for k in p.joint_stiffness_nm_per_rad)}]",
+        f"gravity_softening_per_knm = {float(p.gravity_softening_per_knm)!r}", "",
         "[modes]", f"zeta = {p.zeta!r}", f"robot_modes_per_direction = {p.robot_modes_per_direction}", "",
         "[flange]", f"mass_kg = {float(p.flange_mass_kg)!r}", f"offset_m = [{', '.join(repr(float(v)) for v in p.flange_mass_offset_m)}]", "",
     ]

@@ -31,8 +31,9 @@ from posedyn.table import DIRECTIONS, Mode
 @dataclass(frozen=True)
 class TwinParameters:
     """Joint stiffnesses (N m / rad, A1..A6), robot-mode damping ratio, pose-independent
-    spindle-tool modes per direction, how many robot modes each direction reports, and an
-    extra point mass on the flange (device mounted on the spindle housing; 0 by default)."""
+    spindle-tool modes per direction, how many robot modes each direction reports, an extra
+    point mass on the flange (device mounted on the spindle housing; 0 by default) and the
+    joints' softening under their gravity torque (0 by default)."""
 
     joint_stiffness_nm_per_rad: tuple[float, ...] = (3.0e6, 4.0e6, 2.0e6, 6.0e5, 6.0e5, 4.5e5)
     zeta: float = 0.03
@@ -40,6 +41,7 @@ class TwinParameters:
     robot_modes_per_direction: int = 3
     flange_mass_kg: float = 0.0
     flange_mass_offset_m: tuple[float, float, float] = (0.15, 0.0, 0.12)
+    gravity_softening_per_knm: float = 0.0  # c: joint j's stiffness k_j / (1 + c |tau_g,j(q)| / 1 kN m) under its gravity torque
 
     def __post_init__(self):
         k = np.asarray(self.joint_stiffness_nm_per_rad, dtype=float)
@@ -49,6 +51,8 @@ class TwinParameters:
             raise InputError("a damping ratio in (0, 1)", got=self.zeta, column="zeta")
         if not 1 <= self.robot_modes_per_direction <= 6:
             raise InputError("1 to 6 robot modes per direction", got=self.robot_modes_per_direction, column="robot_modes_per_direction")
+        if not (np.isfinite(self.gravity_softening_per_knm) and self.gravity_softening_per_knm > -0.2):
+            raise InputError("a gravity softening > -0.2 per kN m", got=self.gravity_softening_per_knm, column="gravity_softening_per_knm")
         if not (np.isfinite(self.flange_mass_kg) and self.flange_mass_kg >= 0):
             raise InputError("a flange mass >= 0 kg", got=self.flange_mass_kg, column="flange_mass_kg")
         for d, modes in self.spindle_modes.items():
@@ -120,12 +124,23 @@ def normal_modes(M: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return scipy.linalg.eigh(K, M)
 
 
+def joint_stiffness(robot: Robot, q: np.ndarray, params: TwinParameters, data: pin.Data) -> np.ndarray:
+    """Joint stiffnesses (N m / rad) at q: k_j / (1 + c |tau_g,j(q)| / 1000 N m), tau_g the
+    gravity torques of the robot's links and spindle (pinocchio's generalized gravity; a flange
+    device's own weight is left out). c = 0: the constant k_j."""
+    k = np.asarray(params.joint_stiffness_nm_per_rad, dtype=float)
+    if params.gravity_softening_per_knm == 0.0:
+        return k
+    tau = pin.computeGeneralizedGravity(robot.model, data, q)
+    return k / np.maximum(1.0 + params.gravity_softening_per_knm * np.abs(tau) / 1000.0, 0.05)
+
+
 def twin_modes(robot: Robot, q: np.ndarray, params: TwinParameters, data: pin.Data | None = None) -> TwinModes:
     """Modes of the robot at joint angles q (rad)."""
     data = data or robot.model.createData()
     q = np.asarray(q, dtype=float)
     M = mass_matrix(robot, q, params, data)
-    w2, phi = normal_modes(M, np.diag(params.joint_stiffness_nm_per_rad))
+    w2, phi = normal_modes(M, np.diag(joint_stiffness(robot, q, params, data)))
     J = robot.jacobian(q, data)[:3]
     return TwinModes(
         fn_hz=np.sqrt(w2) / (2 * np.pi),

@@ -79,7 +79,7 @@ def gap(
 
 def _write_updated_model(out: Path, result, twin_file: Optional[Path], model_dir: Optional[Path], measured: Path) -> Optional[str]:
     """The baseline with the named effects that act through the twin (joint stiffnesses scaled,
-    a device's fitted mass on the flange): DIR/twin.toml for a twin baseline (for `posedyn
+    a device's fitted mass on the flange, gravity softening): DIR/twin.toml for a twin baseline (for `posedyn
     schedule/sweep/plan/twin modes --twin`), DIR/model/ for a physics model (its prior twin
     changed, `posedyn.gap.twin_candidates.updated_pose_model`; for every command that takes a
     MODEL_DIR, its cut.toml copied); None when no such effect was named or the model has no twin."""
@@ -91,8 +91,12 @@ def _write_updated_model(out: Path, result, twin_file: Optional[Path], model_dir
     for name, e in through.items():
         (key, value), = e["parameters"].items()
         std = e["parameter_std"][key]
-        lines.append(f"flange_device: mass_kg = {value:.4g} +- {std:.2g} (the device as mounted in the campaign's device = 1 rows)" if name == "flange_device"
-                     else f"{name}: stiffness x {2.0**value:.4g} (log2 {value:.4g} +- {std:.2g})")
+        if name == "flange_device":
+            lines.append(f"flange_device: mass_kg = {value:.4g} +- {std:.2g} (the device as mounted in the campaign's device = 1 rows)")
+        elif name == "gravity_softening":
+            lines.append(f"gravity_softening: + {value:.4g} +- {std:.2g} per kN m of gravity torque")
+        else:
+            lines.append(f"{name}: stiffness x {2.0**value:.4g} (log2 {value:.4g} +- {std:.2g})")
     if model_dir is not None:
         model = load_model(model_dir)
         if not (model.physics_ or {}).get("used"):
