@@ -33,7 +33,15 @@ make unnecessary is dropped (`_drop_unneeded`).
 Effects through a model. A candidate with `combine` changes a model (the twin: `posedyn.gap.
 twin_candidates`) and all such chosen candidates are applied as one changed model; one with
 `fit_quantities` follows the pose and is selected first on those rows alone
-(`_pose_following_first`).
+(`_pose_following_first`), its refinement on every row started by a coarse-to-fine coordinate
+search; two changes of one model that tie are reported with the measurement that separates
+them (`separate`: for the twin, the pose and mode where they differ most).
+
+Surface location error rows (`sle_um`) carry the model's SLE and mean surface-normal force as
+context; their candidates (tool radius, runout, path-following offset, compliance under load,
+cutting coefficients) each name the direct measurement that isolates them (`separate_by`).
+Where nothing explains the residual, `posedyn.gap.discrepancy` maps it smoothly over the pose
+and the conditions.
 """
 
 from __future__ import annotations
