@@ -32,9 +32,9 @@ def gap(
     model: Optional[Path] = typer.Option(None, "--model", help="Model directory: its predictions are the baseline."),
     twin: bool = typer.Option(False, "--twin", help="The robot twin is the baseline (--twin-file to choose one)."),
     twin_file: Path = typer.Option(SHIPPED_TWIN, "--twin-file"),
-    cut: Optional[Path] = typer.Option(None, "--cut", help="Cut for critical_depth_mm rows (default: MODEL_DIR/cut.toml; needed when the campaign has such rows)."),
+    cut: Optional[Path] = typer.Option(None, "--cut", help="Cut for critical_depth_mm and sle_um rows (default: MODEL_DIR/cut.toml; needed when the campaign has such rows)."),
     absorber: Optional[Path] = typer.Option(None, "--absorber", help="Absorber for absorber_* rows (default: seed 004's)."),
-    out: Path = typer.Option(..., "--out", help="Output directory: report.html, gap.json."),
+    out: Path = typer.Option(..., "--out", help="Output directory: report.html, gap.json, and the model with the named effects (twin.toml or model/, cut.toml, absorber.toml) where they apply."),
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Find where the model and the measurements disagree, name the missing effect, add it, show the gap shrink."""
@@ -42,7 +42,7 @@ def gap(
         raise InputError("either --model MODEL_DIR or --twin", column="--model")
     m = read_measurements(measured)
     if cut is None and model is not None and (model / "cut.toml").exists():
-        cut = resolve_cut(cut, model)  # the model's cut; without one, only critical_depth_mm rows need --cut
+        cut = resolve_cut(cut, model)  # the model's cut; without one, only critical_depth_mm and sle_um rows need --cut
     baseline = Baseline(twin_file=None if model else twin_file, model_dir=model, cut_file=cut, absorber_file=absorber)
     y, m = baseline.predict(m)
     result = analyse(m, y, library=baseline.library())
