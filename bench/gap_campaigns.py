@@ -21,6 +21,7 @@ KINDS = {
     "7 kg device on the flange": dict(mass_kg=7.0),
     "axis 2 x0.7, axis 3 x1.25": dict(joint_scale=(1.0, 0.7, 1.25, 1.0, 1.0, 1.0)),
     "joints softer under gravity, 0.1 per kN m": dict(gravity_per_knm=0.1),
+    "0.2 kg sensor at the tool tip": dict(sensor_kg=0.2),
     "nothing hidden": dict(),
 }
 
@@ -34,6 +35,8 @@ def right(kind: str, result) -> bool:
     if kind.startswith("axis"):
         return (names == ["joint_stiffness_a2", "joint_stiffness_a3"] and abs(2 ** fitted["joint_stiffness_a2"] / 0.7 - 1) <= 0.1
                 and abs(2 ** fitted["joint_stiffness_a3"] / 1.25 - 1) <= 0.1 and close)
+    if kind.startswith("0.2 kg sensor"):
+        return names == ["sensor_mass"] and abs(fitted["sensor_mass"] / 0.2 - 1) <= 0.1 and close
     if kind.startswith("joints softer"):
         return names == ["gravity_softening"] and abs(fitted["gravity_softening"] / 0.1 - 1) <= 0.1 and close
     return not names and not result.ambiguous

@@ -31,28 +31,34 @@ from posedyn.robot.twin import twin_modes
 
 MODEL_JOINT_COLUMNS = tuple(f"model_q{j}_rad" for j in range(1, 7))
 #: The candidates that act through the twin.
-TWIN_EFFECTS = tuple(f"joint_stiffness_a{j}" for j in range(1, 7)) + ("flange_device", "gravity_softening")
+TWIN_EFFECTS = tuple(f"joint_stiffness_a{j}" for j in range(1, 7)) + ("flange_device", "gravity_softening", "sensor_mass")
+#: Twin effects of the measurement chain: they explain the measured modes, but the robot that
+#: machines does not carry them (not written into an updated twin or model).
+MEASUREMENT_CHAIN = ("sensor_mass",)
 
 
-def twin_changes(values: dict) -> tuple[np.ndarray, float, float]:
-    """(joint stiffness factors (6,), flange mass kg, added gravity softening per kN m) of named
-    twin candidates {name: parameter}."""
-    scale, flange_kg, softening = np.ones(6), 0.0, 0.0
+def twin_changes(values: dict) -> tuple[np.ndarray, float, float, float]:
+    """(joint stiffness factors (6,), flange mass kg, added gravity softening per kN m, tool-tip
+    mass kg) of named twin candidates {name: parameter}."""
+    scale, flange_kg, softening, tip_kg = np.ones(6), 0.0, 0.0, 0.0
     for name, value in values.items():
         if name == "flange_device":
             flange_kg = float(value)
         elif name == "gravity_softening":
             softening = float(value)
+        elif name == "sensor_mass":
+            tip_kg = float(value)
         else:
             scale[int(name.removeprefix("joint_stiffness_a")) - 1] = 2.0 ** float(value)
-    return scale, flange_kg, softening
+    return scale, flange_kg, softening, tip_kg
 
 
 def updated_twin(params: TwinParameters, values: dict) -> TwinParameters:
-    """The twin with named twin candidates applied (the flange mass as mounted in the device rows)."""
-    scale, flange_kg, softening = twin_changes(values)
+    """The twin with named twin candidates applied (the flange mass as mounted in the device rows,
+    the sensor's mass as in the impact tests)."""
+    scale, flange_kg, softening, tip_kg = twin_changes(values)
     return replace(params.scaled(scale), flange_mass_kg=params.flange_mass_kg + flange_kg,
-                   gravity_softening_per_knm=params.gravity_softening_per_knm + softening)
+                   gravity_softening_per_knm=params.gravity_softening_per_knm + softening, tip_mass_kg=params.tip_mass_kg + tip_kg)
 
 
 def updated_pose_model(model, values: dict, note: str):
@@ -76,19 +82,20 @@ def twin_candidates(robot: Robot, params: TwinParameters) -> dict[str, Candidate
     `device` = 1, at the twin's flange offset, kg 0-200)."""
     cache: dict = {}
 
-    def table(q: tuple, scale: tuple, flange_kg: float, softening: float) -> dict:
-        key = (q, scale, round(flange_kg, 12), round(softening, 14))
+    def table(q: tuple, scale: tuple, flange_kg: float, softening: float, tip_kg: float) -> dict:
+        key = (q, scale, round(flange_kg, 12), round(softening, 14), round(tip_kg, 12))
         if key not in cache:
             p = params.scaled(np.asarray(scale))
-            if flange_kg or softening:
-                p = replace(p, flange_mass_kg=p.flange_mass_kg + flange_kg, gravity_softening_per_knm=p.gravity_softening_per_knm + softening)
+            if flange_kg or softening or tip_kg:
+                p = replace(p, flange_mass_kg=p.flange_mass_kg + flange_kg, gravity_softening_per_knm=p.gravity_softening_per_knm + softening,
+                            tip_mass_kg=p.tip_mass_kg + tip_kg)
             modes = twin_modes(robot, np.asarray(q), p)
             if len(cache) > 20000:
                 cache.clear()
             cache[key] = {(d, j): row for d in ("x", "y", "z") for j, row in enumerate(direction_rows(modes, d, params.robot_modes_per_direction), 1)}
         return cache[key]
 
-    def ratio(m: Measurements, scale, flange_kg: float, softening: float) -> np.ndarray:
+    def ratio(m: Measurements, scale, flange_kg: float, softening: float, tip_kg: float) -> np.ndarray:
         """changed / nominal twin for every fn_hz and k_n_per_m row (1 elsewhere)."""
         out = np.ones(len(m))
         q_all = np.column_stack([m.column(c) for c in MODEL_JOINT_COLUMNS])
@@ -98,7 +105,7 @@ def twin_candidates(robot: Robot, params: TwinParameters) -> dict[str, Candidate
         for i in np.flatnonzero(modal):
             q = tuple(np.round(q_all[i], 12))
             key = (str(m.direction[i]), int(m.mode[i]))
-            nominal, changed = table(q, (1.0,) * 6, 0.0, 0.0), table(q, scale, float(flange[i]), softening)
+            nominal, changed = table(q, (1.0,) * 6, 0.0, 0.0, 0.0), table(q, scale, float(flange[i]), softening, tip_kg)
             if key in nominal and key in changed:
                 column = 0 if m.quantity[i] == "fn_hz" else 2
                 with np.errstate(all="ignore"):
@@ -152,6 +159,11 @@ def twin_candidates(robot: Robot, params: TwinParameters) -> dict[str, Candidate
         return {(d, j): row[0] for d in ("x", "y") for j, row in enumerate(direction_rows(modes, d, params.robot_modes_per_direction), 1)}
 
     out = {f"joint_stiffness_a{j + 1}": joint(j) for j in range(6)}
+    out["sensor_mass"] = CandidateEffect(
+        "sensor_mass", "the impact test's sensor at the tool tip adds its mass to every measured mode (the modes recomputed with it at every pose)",
+        "modal testing practice (mass loading by the accelerometer); seed 001 section 3 (impact tests at the tool tip)", ("fn_hz", "k_n_per_m"), (),
+        (Parameter("mass_kg", 0.1, 0.0, 5.0),), lambda y, m, t: combine(y, m, {"sensor_mass": t}), combine=combine, fit_quantities=("fn_hz",),
+        separate=separate, separate_by="repeat a test with a lighter sensor or a laser vibrometer")
     out["gravity_softening"] = CandidateEffect(
         "gravity_softening", "the joints soften under the gravity torque they carry (k / (1 + c |tau_g| / 1 kN m), the modes recomputed at every pose)",
         "seed 003 section 2 (load-dependent joint stiffness); Dumas et al. 2011", ("fn_hz", "k_n_per_m"), (),

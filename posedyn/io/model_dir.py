@@ -71,6 +71,7 @@ def save_model(model: PoseModel, folder: str | os.PathLike) -> None:
                         "flange_mass_kg": params.flange_mass_kg,
                         "flange_mass_offset_m": list(params.flange_mass_offset_m),
                         "gravity_softening_per_knm": params.gravity_softening_per_knm,
+                        "tip_mass_kg": params.tip_mass_kg,
                         "spindle_modes": {d: [[m.fn_hz, m.zeta, m.k_n_per_m] for m in ms] for d, ms in params.spindle_modes.items()},
                     },
                 )
@@ -130,6 +131,7 @@ def load_model(folder: str | os.PathLike) -> PoseModel:
                 flange_mass_kg=twin["flange_mass_kg"],
                 flange_mass_offset_m=tuple(twin["flange_mass_offset_m"]),
                 gravity_softening_per_knm=twin.get("gravity_softening_per_knm", 0.0),
+                tip_mass_kg=twin.get("tip_mass_kg", 0.0),
                 spindle_modes={d: tuple(Mode(*m) for m in ms) for d, ms in twin["spindle_modes"].items()},
             )
             robot = Robot.from_xml((folder / model.physics_["robot_urdf"]).read_text(encoding="utf-8"), model.physics_.get("robot_name", ""))

@@ -2,7 +2,7 @@
 `[joints] stiffness_nm_per_rad = [six values]`, optional `gravity_softening_per_knm` (joint
 stiffness k / (1 + c |gravity torque| / 1 kN m)); `[modes] zeta, robot_modes_per_direction`;
 optional `[flange] mass_kg, offset_m = [x, y, z]` (a device on the flange, e.g. written by the
-gap workflow); `[[spindle_modes]] direction, fn_hz, k_n_per_m, zeta`. The one place a twin file
+gap workflow) and `[tool_tip] mass_kg` (a sensor at the tool tip); `[[spindle_modes]] direction, fn_hz, k_n_per_m, zeta`. The one place a twin file
 becomes a Robot and its TwinParameters, and the one place one is written (`write_twin`)."""
 
 from __future__ import annotations
@@ -44,6 +44,7 @@ def read_twin(path: str | os.PathLike) -> TwinSpec:
             flange_mass_kg=float(flange.get("mass_kg", 0.0)),
             flange_mass_offset_m=tuple(float(v) for v in flange.get("offset_m", TwinParameters().flange_mass_offset_m)),
             gravity_softening_per_knm=float(p["joints"].get("gravity_softening_per_knm", 0.0)),
+            tip_mass_kg=float(p.get("tool_tip", {}).get("mass_kg", 0.0)),
         )
         return TwinSpec(urdf=urdf, payload_kg=float(robot["payload_kg"]), params=params)
 
@@ -60,6 +61,7 @@ def write_twin(path: str | os.PathLike, spec: TwinSpec, source: str, comment: st
         f"gravity_softening_per_knm = {float(p.gravity_softening_per_knm)!r}", "",
         "[modes]", f"zeta = {p.zeta!r}", f"robot_modes_per_direction = {p.robot_modes_per_direction}", "",
         "[flange]", f"mass_kg = {float(p.flange_mass_kg)!r}", f"offset_m = [{', '.join(repr(float(v)) for v in p.flange_mass_offset_m)}]", "",
+        "[tool_tip]", f"mass_kg = {float(p.tip_mass_kg)!r}", "",
     ]
     for d, modes in p.spindle_modes.items():
         for m in modes:

@@ -32,8 +32,9 @@ from posedyn.table import DIRECTIONS, Mode
 class TwinParameters:
     """Joint stiffnesses (N m / rad, A1..A6), robot-mode damping ratio, pose-independent
     spindle-tool modes per direction, how many robot modes each direction reports, an extra
-    point mass on the flange (device mounted on the spindle housing; 0 by default) and the
-    joints' softening under their gravity torque (0 by default)."""
+    point mass on the flange (device mounted on the spindle housing; 0 by default), one at the
+    tool tip (a sensor; 0 by default) and the joints' softening under their gravity torque (0 by
+    default)."""
 
     joint_stiffness_nm_per_rad: tuple[float, ...] = (3.0e6, 4.0e6, 2.0e6, 6.0e5, 6.0e5, 4.5e5)
     zeta: float = 0.03
@@ -42,6 +43,7 @@ class TwinParameters:
     flange_mass_kg: float = 0.0
     flange_mass_offset_m: tuple[float, float, float] = (0.15, 0.0, 0.12)
     gravity_softening_per_knm: float = 0.0  # c: joint j's stiffness k_j / (1 + c |tau_g,j(q)| / 1 kN m) under its gravity torque
+    tip_mass_kg: float = 0.0  # a point mass at the tool tip (an impact test's accelerometer)
 
     def __post_init__(self):
         k = np.asarray(self.joint_stiffness_nm_per_rad, dtype=float)
@@ -53,6 +55,8 @@ class TwinParameters:
             raise InputError("1 to 6 robot modes per direction", got=self.robot_modes_per_direction, column="robot_modes_per_direction")
         if not (np.isfinite(self.gravity_softening_per_knm) and self.gravity_softening_per_knm > -0.2):
             raise InputError("a gravity softening > -0.2 per kN m", got=self.gravity_softening_per_knm, column="gravity_softening_per_knm")
+        if not (np.isfinite(self.tip_mass_kg) and self.tip_mass_kg >= 0):
+            raise InputError("a tool-tip mass >= 0 kg", got=self.tip_mass_kg, column="tip_mass_kg")
         if not (np.isfinite(self.flange_mass_kg) and self.flange_mass_kg >= 0):
             raise InputError("a flange mass >= 0 kg", got=self.flange_mass_kg, column="flange_mass_kg")
         for d, modes in self.spindle_modes.items():
@@ -98,13 +102,16 @@ class TwinModes:
 
 
 def mass_matrix(robot: Robot, q: np.ndarray, params: TwinParameters, data: pin.Data | None = None) -> np.ndarray:
-    """Joint-space mass matrix M(q) (CRBA, symmetrised), with the optional flange point mass
-    added through its Jacobian: M += m J_p^T J_p."""
+    """Joint-space mass matrix M(q) (CRBA, symmetrised), with the optional flange and tool-tip
+    point masses added through their Jacobians: M += m J_p^T J_p."""
     data = data or robot.model.createData()
     M = pin.crba(robot.model, data, np.asarray(q, dtype=float))
     M = np.triu(M) + np.triu(M, 1).T
     if params.flange_mass_kg > 0:
         M = M + params.flange_mass_kg * _point_jacobian(robot, q, params.flange_mass_offset_m, data).T @ _point_jacobian(robot, q, params.flange_mass_offset_m, data)
+    if params.tip_mass_kg > 0:
+        J = robot.jacobian(q, data)[:3]
+        M = M + params.tip_mass_kg * J.T @ J
     return M
 
 
@@ -146,5 +153,22 @@ def twin_modes(robot: Robot, q: np.ndarray, params: TwinParameters, data: pin.Da
         fn_hz=np.sqrt(w2) / (2 * np.pi),
         zeta=np.full(6, params.zeta),
         tip_shapes=J @ phi,
-        spindle_modes=dict(params.spindle_modes),
+        spindle_modes=_tip_loaded(params.spindle_modes, params.tip_mass_kg),
     )
+
+
+def _tip_loaded(spindle_modes: dict, tip_mass_kg: float) -> dict:
+    """Spindle-tool modes with a point mass at the tool tip: each mode's modal mass m = k / w^2
+    grows by it, so w' = w sqrt(m / (m + m_tip)), zeta' = zeta sqrt(m / (m + m_tip)) (same k and
+    c); the robot modes carry it through the mass matrix."""
+    if tip_mass_kg == 0.0:
+        return dict(spindle_modes)
+    out = {}
+    for d, modes in spindle_modes.items():
+        loaded = []
+        for mode in modes:
+            mass = mode.k_n_per_m / (2 * np.pi * mode.fn_hz) ** 2
+            ratio = np.sqrt(mass / (mass + tip_mass_kg))
+            loaded.append(Mode(float(mode.fn_hz * ratio), float(mode.zeta * ratio), mode.k_n_per_m))
+        out[d] = tuple(loaded)
+    return out

@@ -14,7 +14,7 @@ from rich.markup import escape
 from absorber.coil_dynamics import CoilDrive
 from posedyn.errors import InputError
 from posedyn.gap import LIBRARY, analyse
-from posedyn.gap.twin_candidates import TWIN_EFFECTS, updated_pose_model, updated_twin
+from posedyn.gap.twin_candidates import MEASUREMENT_CHAIN, TWIN_EFFECTS, updated_pose_model, updated_twin
 from posedyn.io.atomic import write_text_atomic
 from posedyn.io.json_values import json_ready
 from posedyn.io.measurements import format_measurements, read_measurements
@@ -79,20 +79,23 @@ def gap(
 
 def _write_updated_model(out: Path, result, twin_file: Optional[Path], model_dir: Optional[Path], measured: Path) -> Optional[str]:
     """The baseline with the named effects that act through the twin (joint stiffnesses scaled,
-    a device's fitted mass on the flange, gravity softening): DIR/twin.toml for a twin baseline (for `posedyn
+    a device's fitted mass on the flange, gravity softening; not the measurement chain's sensor
+    mass): DIR/twin.toml for a twin baseline (for `posedyn
     schedule/sweep/plan/twin modes --twin`), DIR/model/ for a physics model (its prior twin
     changed, `posedyn.gap.twin_candidates.updated_pose_model`; for every command that takes a
     MODEL_DIR, its cut.toml copied); None when no such effect was named or the model has no twin."""
     through = {e["name"]: e for e in result.effects if e["name"] in TWIN_EFFECTS}
-    if not through:
+    values = {name: next(iter(e["parameters"].values())) for name, e in through.items() if name not in MEASUREMENT_CHAIN}
+    if not values:
         return None
-    values = {name: next(iter(e["parameters"].values())) for name, e in through.items()}
     lines = []
     for name, e in through.items():
         (key, value), = e["parameters"].items()
         std = e["parameter_std"][key]
         if name == "flange_device":
             lines.append(f"flange_device: mass_kg = {value:.4g} +- {std:.2g} (the device as mounted in the campaign's device = 1 rows)")
+        elif name == "sensor_mass":
+            lines.append(f"sensor_mass: {value:.4g} +- {std:.2g} kg at the tool tip in the impact tests (not added: the machining robot does not carry it)")
         elif name == "gravity_softening":
             lines.append(f"gravity_softening: + {value:.4g} +- {std:.2g} per kN m of gravity torque")
         else:
