@@ -5,7 +5,8 @@ Baseline per quantity: `fn_hz` and `k_n_per_m` of a direction's mode from the tw
 model) as a modal table numbers them; `k_xy_n_per_m` zero (the modal-table model has no cross
 terms); `critical_depth_mm` from the converged stability engine on the pose's x-y modes at the row's
 `rpm` with the cut file; `absorber_fn_hz` and `absorber_zeta` from the MRF absorber model at the
-row's `field_mt`.
+row's `field_mt` (and `temperature_c` where the absorber file states a modulus temperature law);
+`sle_um` from `posedyn.sle` on the pose's x-y modes with the row's tool and cut.
 """
 
 from __future__ import annotations
@@ -167,7 +168,6 @@ class Baseline:
             q = np.array([joints[p] for p in m.pose_id])
             conditions.update({c: q[:, j] for j, c in enumerate(MODEL_JOINT_COLUMNS)})
         return y, replace(m, conditions=conditions)
-
 
     def _sle(self, m: Measurements, rows: list[int], structures: dict, y: np.ndarray) -> dict:
         """SLE rows (`posedyn.sle.sle_m`, + = undercut) into y, and their context: the model's SLE
