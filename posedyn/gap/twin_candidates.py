@@ -1,19 +1,23 @@
-"""Candidates that act through the robot twin (issue 18): a device on the flange is added to the
-twin and the modes are recomputed at every campaign pose, so the candidate moves fn and the modal
-stiffness together as the physics does (M(q) += m J_p^T J_p, K_theta phi = w^2 M phi, k_rd =
-w_r^2 / u_rd^2; seed 003 eqs. 15-17, seed 000 Fig. 2). Candidates that act through the twin
-combine into one changed twin (`CandidateEffect.combine`), not into a product of factors.
+"""Candidates that act through the robot twin (issue 18): the twin is changed and its modes are
+recomputed at every campaign pose, so a candidate moves fn and the modal stiffness together as
+the physics does (M(q) += m J_p^T J_p, K_theta phi = w^2 M phi, k_rd = w_r^2 / u_rd^2; seed 003
+eqs. 15-17, seed 000 Fig. 2). Candidates that act through the twin combine into one changed twin
+(`CandidateEffect.combine`), not into a product of factors.
 
-Not here: per-joint stiffness candidates. Tried (axis 2 30 % softer and axis 3 25 % stiffer than
-the twin): with modes numbered by frequency rank per direction, as the twin's tables number them,
-the fit's landscape jumps wherever two modes cross, and neither one-joint-at-a-time selection nor
-a six-joint fit from a grid of starts found the truth. They need modes matched by shape (MAC)
-between the twin and the campaign.
+- `flange_device`: a device's mass on the flange in the `device` = 1 rows.
+- `joint_stiffness_a1` .. `a6`, `gravity_softening` (k_j / (1 + c |tau_g,j(q)|)): they follow
+  the pose with no condition column, so `posedyn.gap.analysis` selects them first on the fn
+  rows (continuous in the stiffness, where the modal stiffness of a mode numbered by frequency
+  rank jumps as modes cross) and refines them on every row from a coordinate search.
+- `sensor_mass`: the impact test's sensor at the tool tip on every row (measurement chain: it
+  explains the measured modes; the machining twin does not get it, `MEASUREMENT_CHAIN`).
 
-A row's correction is the ratio of the changed twin's value to the nominal twin's for the row's
-(direction, mode) as modal tables number them (`posedyn.robot.direction_rows`), applied to the
-baseline, so the candidates also correct a trained model's predictions. Rows carry their pose's
-joint angles as the context columns `model_q1_rad` .. `model_q6_rad` (the gap baseline adds them).
+Two changed twins that explain a campaign alike are told apart by the pose and mode where their
+fn differ most (`separate`). A row's correction is the ratio of the changed twin's value to the
+nominal twin's for the row's (direction, mode) as modal tables number them
+(`posedyn.robot.direction_rows`), applied to the baseline, so the candidates also correct a
+trained model's predictions. Rows carry their pose's joint angles as the context columns
+`model_q1_rad` .. `model_q6_rad` (the gap baseline adds them).
 """
 
 from __future__ import annotations
