@@ -609,6 +609,8 @@ def analyse(m: Measurements, baseline: np.ndarray, library: dict[str, CandidateE
         rms = float(np.sqrt(np.mean(after**2)))
         explained = max(noise.scale, rms) <= PLAUSIBLE_NOISE_SCALE and not residual_correlates(m, after, level=NOISE_P / max(_tests(m), 1))
     correlates = [] if explained else residual_correlates(m, after)
+    if explained:  # a tie on the fn rows alone that the named effects resolved (e.g. a device's rows read as a joint) is no ambiguity
+        ambiguous = [a for a in ambiguous if a not in undecided]
     where = None
     if not explained:  # a smooth map of what is left, for the quantity that misses most
         counts = {q: np.sum(m.quantity == q) for q in np.unique(m.quantity)}

@@ -166,7 +166,7 @@ def twin_candidates(robot: Robot, params: TwinParameters) -> dict[str, Candidate
     out["sensor_mass"] = CandidateEffect(
         "sensor_mass", "the impact test's sensor at the tool tip adds its mass to every measured mode (the modes recomputed with it at every pose)",
         "modal testing practice (mass loading by the accelerometer); seed 001 section 3 (impact tests at the tool tip)", ("fn_hz", "k_n_per_m"), (),
-        (Parameter("mass_kg", 0.1, 0.0, 5.0),), lambda y, m, t: combine(y, m, {"sensor_mass": t}), combine=combine, fit_quantities=("fn_hz",),
+        (Parameter("mass_kg", 0.1, 0.0, 5.0),), lambda y, m, t: combine(y, m, {"sensor_mass": t}), combine=combine,
         separate=separate, separate_by="repeat a test with a lighter sensor or a laser vibrometer")
     out["gravity_softening"] = CandidateEffect(
         "gravity_softening", "the joints soften under the gravity torque they carry (k / (1 + c |tau_g| / 1 kN m), the modes recomputed at every pose)",
