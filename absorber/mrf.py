@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from posedyn.errors import InputError, check_non_negative, check_positive
+from posedyn.errors import InputError, check_finite, check_non_negative, check_positive
 
 
 @dataclass(frozen=True)
@@ -58,6 +58,7 @@ class MRFAbsorber:
             check_positive(name, getattr(self, name))
         for name in ("r1_m", "field_min_t", "loss_factor_mrf", "loss_factor_elastomer"):
             check_non_negative(name, getattr(self, name))
+        check_finite("zeta_per_tesla", self.zeta_per_tesla)
         if not self.r2_m > self.r1_m:
             raise InputError("r2_m > r1_m", got=(self.r1_m, self.r2_m), column="r2_m")
         if not self.ginf_pa > self.g0_pa:
