@@ -23,6 +23,7 @@ trained model's predictions. Rows carry their pose's joint angles as the context
 from __future__ import annotations
 
 import copy
+import itertools
 import math
 from dataclasses import replace
 
@@ -139,18 +140,17 @@ def twin_candidates(robot: Robot, params: TwinParameters) -> dict[str, Candidate
         params_a, params_b = updated_twin(params, a), updated_twin(params, b)
         data = robot.model.createData()
         best = None
-        for px in np.linspace(x[ok].min(), x[ok].max(), 5):
-            for py in np.linspace(y[ok].min(), y[ok].max(), 5):
-                for pb in np.linspace(beta[ok].min(), beta[ok].max(), 5):
-                    try:
-                        q = robot.inverse(ToolPose.from_beta(px * 1e-3, py * 1e-3, float(np.median(z[ok])) * 1e-3, math.radians(pb)), data)
-                    except InputError:
-                        continue
-                    rows_a, rows_b = (direction_fn(twin_modes(robot, q, p, data)) for p in (params_a, params_b))
-                    for key in rows_a.keys() & rows_b.keys():
-                        gap = abs(rows_a[key] / rows_b[key] - 1.0)
-                        if best is None or gap > best[0]:
-                            best = (gap, px, py, pb, key, rows_a[key], rows_b[key])
+        box = (np.linspace(v[ok].min(), v[ok].max(), 5) for v in (x, y, beta))
+        for px, py, pb in itertools.product(*box):
+            try:
+                q = robot.inverse(ToolPose.from_beta(px * 1e-3, py * 1e-3, float(np.median(z[ok])) * 1e-3, math.radians(pb)), data)
+            except InputError:
+                continue
+            rows_a, rows_b = (direction_fn(twin_modes(robot, q, p, data)) for p in (params_a, params_b))
+            for key in rows_a.keys() & rows_b.keys():
+                gap = abs(rows_a[key] / rows_b[key] - 1.0)
+                if best is None or gap > best[0]:
+                    best = (gap, px, py, pb, key, rows_a[key], rows_b[key])
         if best is None:
             return None
         gap, px, py, pb, (d, j), fa, fb = best

@@ -74,11 +74,12 @@ def write_params(path: str | os.PathLike, params: dict, comment: str = "") -> No
     for table in sorted(params, key=lambda t: t != "meta"):
         lines += ["", f"[{table}]"]
         for key, value in params[table].items():
-            lines.append(f"{key} = {_toml_value(value, f'{table}.{key}')}")
+            lines.append(f"{key} = {toml_value(value, f'{table}.{key}')}")
     write_text_atomic(path, "\n".join(lines).lstrip("\n") + "\n")
 
 
-def _toml_value(value, name: str) -> str:
+def toml_value(value, name: str = "value") -> str:
+    """A TOML value (string, number, boolean or list of numbers) as written in a parameter file."""
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, (int, float)):

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from posedyn.io.atomic import write_text_atomic
-from posedyn.io.params import read_params, reading
+from posedyn.io.params import read_params, reading, toml_value
 from posedyn.io.shipped import SHIPPED_TWIN
 from posedyn.robot import Robot, TwinParameters
 from posedyn.table import Mode
@@ -55,8 +55,8 @@ def write_twin(path: str | os.PathLike, spec: TwinSpec, source: str, comment: st
     p = spec.params
     urdf = Path(os.path.relpath(spec.urdf, path.parent.resolve())).as_posix()
     lines = [f"# {line}" for line in comment.splitlines()] + [
-        "", "[meta]", 'kind = "robot_twin"', f"source = {_toml_string(source)}", "",
-        "[robot]", f"urdf = {_toml_string(urdf)}", f"payload_kg = {spec.payload_kg!r}", "",
+        "", "[meta]", 'kind = "robot_twin"', f"source = {toml_value(source)}", "",
+        "[robot]", f"urdf = {toml_value(urdf)}", f"payload_kg = {spec.payload_kg!r}", "",
         "[joints]", f"stiffness_nm_per_rad = [{', '.join(repr(float(k)) for k in p.joint_stiffness_nm_per_rad)}]",
         f"gravity_softening_per_knm = {float(p.gravity_softening_per_knm)!r}", "",
         "[modes]", f"zeta = {p.zeta!r}", f"robot_modes_per_direction = {p.robot_modes_per_direction}", "",
@@ -65,13 +65,8 @@ def write_twin(path: str | os.PathLike, spec: TwinSpec, source: str, comment: st
     ]
     for d, modes in p.spindle_modes.items():
         for m in modes:
-            lines += ["[[spindle_modes]]", f"direction = {_toml_string(d)}", f"fn_hz = {float(m.fn_hz)!r}", f"k_n_per_m = {float(m.k_n_per_m)!r}", f"zeta = {float(m.zeta)!r}", ""]
+            lines += ["[[spindle_modes]]", f"direction = {toml_value(d)}", f"fn_hz = {float(m.fn_hz)!r}", f"k_n_per_m = {float(m.k_n_per_m)!r}", f"zeta = {float(m.zeta)!r}", ""]
     write_text_atomic(path, "\n".join(lines))
-
-
-def _toml_string(text: str) -> str:
-    """A TOML basic string."""
-    return '"' + text.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
 
 
 def load_twin(path: str | os.PathLike | None = None, payload_kg: float | None = None) -> tuple[Robot, TwinParameters]:

@@ -108,7 +108,8 @@ def mass_matrix(robot: Robot, q: np.ndarray, params: TwinParameters, data: pin.D
     M = pin.crba(robot.model, data, np.asarray(q, dtype=float))
     M = np.triu(M) + np.triu(M, 1).T
     if params.flange_mass_kg > 0:
-        M = M + params.flange_mass_kg * _point_jacobian(robot, q, params.flange_mass_offset_m, data).T @ _point_jacobian(robot, q, params.flange_mass_offset_m, data)
+        J = _point_jacobian(robot, q, params.flange_mass_offset_m, data)
+        M = M + params.flange_mass_kg * J.T @ J
     if params.tip_mass_kg > 0:
         J = robot.jacobian(q, data)[:3]
         M = M + params.tip_mass_kg * J.T @ J

@@ -67,12 +67,17 @@ class Baseline:
         prior = self.model.prior_model_
         return prior.robot, prior.params.scaled(prior.scales)
 
+    def surrogate_library(self) -> dict:
+        """The library with the MRF temperature law through this baseline's absorber (what a
+        synthetic campaign hides its effects with)."""
+        return dict(LIBRARY, **absorber_candidates(self.absorber, self.drive))
+
     def library(self) -> dict:
         """The candidates for this baseline: the library with the MRF temperature law through the
         absorber model (`absorber.gap_candidates`), and where a twin is behind the predictions the
         candidates that act through it (`posedyn.gap.twin_candidates`), which then replace the
         surrogate `device_mass` (the twin's flange mass moves fn and k together)."""
-        out = dict(LIBRARY, **absorber_candidates(self.absorber, self.drive))
+        out = self.surrogate_library()
         twin = self.twin()
         if twin is not None:
             del out["device_mass"]
@@ -246,7 +251,7 @@ def generate_measurements(baseline: Baseline, hidden: dict, seed: int = 0, poses
     that is not in the library (for tests)."""
     design = campaign_design(seed, poses)
     y, with_context = baseline.predict(design)
-    return hide(design, y, with_context, hidden, seed, unknown, library=dict(LIBRARY, **absorber_candidates(baseline.absorber, baseline.drive)))
+    return hide(design, y, with_context, hidden, seed, unknown, library=baseline.surrogate_library())
 
 
 def campaign_design(seed: int = 0, poses: int = 10) -> Measurements:
