@@ -1,0 +1,60 @@
+"""The winding count behind every verified critical depth (`floquet.unstable_count`): the number
+of Floquet multipliers outside the unit circle, from an interpolant of the monodromy on the unit
+circle (`monodromy_polynomial`), checked against the multipliers of the dense
+semi-discretization written as seed 004 states it (`reference`, scipy's expm and LAPACK
+eigenvalues: nothing shared with the Floquet characteristic but the cut's force integrals) and
+against the count from direct samples."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from posedyn.dynamics import ToolTipDynamics
+from posedyn.stability import Cut, floquet, reference
+from posedyn.table import Mode
+
+CASES = [  # (modes x, modes y, cut, rpm): a few vibration periods per tooth period, where 100 steps are plenty
+    ([Mode(922.0, 0.011, 3.35e6)], [Mode(922.0, 0.011, 3.35e6)], Cut(teeth=2, kt_pa=6e8, kn_pa=2e8, radial_immersion=1.0, milling="down"), 9000.0),
+    ([Mode(700.0, 0.02, 8e6), Mode(1600.0, 0.03, 2e7)], [Mode(850.0, 0.015, 1e7)], Cut(teeth=3, kt_pa=7e8, kn_pa=2e8, radial_immersion=0.3, milling="up"), 7000.0),
+    ([Mode(1200.0, 0.01, 2e7)], [Mode(1350.0, 0.012, 1.5e7), Mode(60.0, 0.04, 5e7)], Cut(teeth=4, kt_pa=8e8, kn_pa=2.5e8, radial_immersion=0.6, milling="down"), 12000.0),
+]
+
+
+def _reference_count(dyn, cut, rpm, depth):
+    mu = np.abs(np.linalg.eigvals(reference.monodromy(dyn, cut, rpm, depth, 100)))
+    return int(np.sum(mu > 1.0)), float(np.min(np.abs(mu - 1.0)))
+
+
+@pytest.mark.parametrize("case", range(len(CASES)))
+def test_the_count_is_the_number_of_multipliers_outside_the_circle(case):
+    x, y, cut, rpm = CASES[case]
+    dyn = ToolTipDynamics.from_modes(x=x, y=y)
+    char = floquet.FloquetCharacteristic(dyn, cut, 16.0)
+    tau = float(cut.tooth_period_s(rpm))
+    seen = []
+    for depth in np.geomspace(2e-5, 2e-2, 10):
+        expected, margin = _reference_count(dyn, cut, rpm, depth)
+        if margin < 0.01:  # a multiplier on the circle: the discretizations may disagree
+            continue
+        count, resolved, _ = floquet.unstable_count(char, depth, tau)
+        assert resolved and count == expected, (depth, count, expected)
+        seen.append(count)
+    assert len(seen) >= 6 and seen[0] == 0 and max(seen) >= 2  # stable, then one and more pairs outside
+
+
+def test_the_interpolated_count_is_the_directly_sampled_one(monkeypatch):
+    """Forcing the fallback (no interpolant converges with 4 nodes) samples M directly; both paths
+    give the same count on the robot-plus-spindle structure of issue 17 below and above its
+    critical depth (1.516 mm at 2000 rpm), where the count is 0 and then grows."""
+    from test_stability_multiscale import CUT, TABLE, structure
+
+    char = floquet.FloquetCharacteristic(structure(TABLE), CUT, 4.0)
+    tau = float(CUT.tooth_period_s(2000.0))
+    depths = [0.5e-3, 1.48e-3, 1.6e-3, 3e-3, 6e-3]
+    interpolated = [floquet.unstable_count(char, a, tau)[:2] for a in depths]
+    monkeypatch.setattr(floquet, "INTERP_NODES", (4, 4))
+    direct = [floquet.unstable_count(char, a, tau)[:2] for a in depths]
+    assert interpolated == direct
+    assert [c for c, _ in interpolated][:2] == [0, 0] and all(c > 0 for c, _ in interpolated[2:])
+    assert all(r for _, r in interpolated)
