@@ -589,6 +589,11 @@ def _critical_log(char, a, theta, tau, target=None, idx=None, mode=None, vec=Non
         todo = rows[~ok_f]
         if not len(todo):
             return out_g, out_v
+    finite = np.all(np.isfinite(M[todo]), axis=(1, 2))  # an overflowing element dies (NaN), not the batch
+    out_g[todo[~finite]], out_v[todo[~finite]] = np.nan, np.nan
+    todo = todo[finite]
+    if not len(todo):
+        return out_g, out_v
     Mt, nut = M[todo], nu[todo]
     sig, V = np.linalg.eig(Mt)
     V = V / np.linalg.norm(V, axis=1, keepdims=True)

@@ -35,6 +35,8 @@ dense eigensolver on the formed Psi.
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -257,11 +259,12 @@ def exponentials(stiffness: np.ndarray, damping: np.ndarray, dt: np.ndarray, ord
     return E[:, : 2 * n, : 2 * n], E[:, : 2 * n, 2 * n : 2 * n + r], (E[:, : 2 * n, 2 * n + r :] if order == 1 else None)
 
 
-_PADE13 = (
-    64764752532480000.0, 32382376266240000.0, 7771770303897600.0, 1187353796428800.0, 129060195264000.0,
-    10559470521600.0, 670442572800.0, 33522128640.0, 1323241920.0, 40840800.0, 960960.0, 16380.0, 182.0, 1.0,
-)
-
+#: Taylor polynomial of degree 18 for exp, its coefficients in Paterson-Stockmeyer blocks of four
+#: (c_4j .. c_4j+3, c_19 = 0), and the 1-norm up to which it is accurate to double precision
+#: (backward error below the unit round-off: Bader, Blanes and Casas 2019, the bound PyTorch's
+#: matrix_exp uses; forward truncation 1.09^19 / 19! = 4e-17).
+_TAYLOR18 = np.array([1.0 / math.factorial(k) for k in range(19)] + [0.0]).reshape(5, 4)
+THETA18 = 1.090863719290036
 
 #: Matrices per block in `expm_batched`: blocks this small stay in cache (about 3x faster than
 #: one pass over thousands of 20 x 20 matrices).
@@ -269,25 +272,31 @@ EXPM_BLOCK = 128
 
 
 def expm_batched(A: np.ndarray) -> np.ndarray:
-    """exp(A) for a stack (k, s, s): Higham's [13/13] Pade with scaling and squaring, vectorized
-    over blocks of the stack (one scaling per block, from its largest 1-norm)."""
+    """exp(A) for a stack (k, s, s): Taylor degree 18 with scaling and squaring, vectorized over
+    blocks of the stack (one scaling per block, from its largest 1-norm). No linear solve: for
+    the many small matrices here a batched LU costs as much as 15 products (the [13/13] Pade
+    this replaced, 1.5x slower; same results to 1e-14)."""
     if len(A) > EXPM_BLOCK:
         return np.concatenate([_expm_block(A[i : i + EXPM_BLOCK]) for i in range(0, len(A), EXPM_BLOCK)])
     return _expm_block(A)
 
 
 def _expm_block(A: np.ndarray) -> np.ndarray:
-    b = _PADE13
     norm = np.max(np.abs(A).sum(axis=1))
-    squarings = max(0, int(np.ceil(np.log2(norm / 5.371920351148152)))) if norm > 0 else 0
-    A = A / 2.0**squarings
-    eye = np.eye(A.shape[-1])
+    squarings = max(0, int(np.ceil(np.log2(norm / THETA18)))) if norm > 0 else 0
+    if squarings:
+        A = A * 0.5**squarings
     A2 = A @ A
     A4 = A2 @ A2
-    A6 = A4 @ A2
-    U = A @ (A6 @ (b[13] * A6 + b[11] * A4 + b[9] * A2) + b[7] * A6 + b[5] * A4 + b[3] * A2 + b[1] * eye)
-    V = A6 @ (b[12] * A6 + b[10] * A4 + b[8] * A2) + b[6] * A6 + b[4] * A4 + b[2] * A2 + b[0] * eye
-    R = np.linalg.solve(V - U, V + U)
+    powers = np.empty((4,) + A.shape, dtype=A.dtype)  # I, A, A^2, A^3
+    powers[0] = np.eye(A.shape[-1])
+    powers[1], powers[2] = A, A2
+    np.matmul(A2, A, out=powers[3])
+    blocks = np.tensordot(_TAYLOR18, powers, axes=1)  # one pass for all twenty coefficients
+    R = blocks[4]
+    for j in (3, 2, 1, 0):  # Horner in A^4
+        R = A4 @ R
+        R += blocks[j]
     for _ in range(squarings):
         R = R @ R
     return R
