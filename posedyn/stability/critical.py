@@ -24,8 +24,6 @@ from posedyn.stability.model import Discretization
 
 #: Relative accuracy every default result reaches (or says it did not).
 REL_TOL = 0.02
-#: Sub-steps per radian from which the missed-branch check is repeated at the finer resolution.
-HARD_RESOLUTION = 4.0 * floquet.SUBSTEPS_PER_RAD
 #: Relative bisection tolerance of the semi-discretization override.
 SDM_REL_TOL = 2e-3
 
@@ -51,45 +49,33 @@ class StabilityResult:
         return out
 
 
-def critical_points(structures: list[ToolTipDynamics], cut: Cut, rpm, steps: int | None = None, frequencies: bool = True, verify: bool = True) -> list[StabilityResult]:
+def critical_points(structures: list[ToolTipDynamics], cut: Cut, rpm, steps: int | None = None, frequencies: bool = True, verify: bool = True,
+                    continuation: bool = False) -> list[StabilityResult]:
     """The StabilityResult of each structure at its speed (`rpm` one value or one per
     structure); `steps` switches to the semi-discretization override. A structure the engine
     fails on numerically comes back not converged with an infinite error estimate and a NaN
-    depth (unknown), never as an exception that takes the other structures down."""
+    depth (unknown), never as an exception that takes the other structures down.
+    `continuation`: structures with similar modes start from each other's boundary points
+    (`floquet.critical_depths`; the same verified answers at about half the cost)."""
     structures = list(structures)
     rpm = np.broadcast_to(np.asarray(rpm, dtype=float), (len(structures),))
     if not structures:
         return []
     if steps is None:
-        points = _floquet_points(structures, cut, rpm, verify)
-        if verify:
-            points = [_verified_at_resolution(p, dyn, cut, r) for p, dyn, r in zip(points, structures, rpm)]
+        points = _floquet_points(structures, cut, rpm, verify, frequencies, continuation)
         return [_converged_or_flagged(p, frequencies) for p in points]
     return _sdm_points(structures, cut, rpm, steps, frequencies)
 
 
-def _verified_at_resolution(point, dyn, cut, rpm):
-    """The engine checks for a missed lower branch at its coarsest resolution. Where the answer
-    needed HARD_RESOLUTION or finer (sharp force changes: one tooth, low immersion), the coarse
-    cut model can lack that branch altogether, so the point is solved again with the check made
-    at half the resolution it needed; a failed check then flags it (`verified` False)."""
-    if point is None or not math.isfinite(point.depth_m) or point.substeps_per_rad < HARD_RESOLUTION:
-        return point
-    try:
-        return floquet.critical_depth(dyn, cut, float(rpm), rel_tol=REL_TOL, substeps_per_rad=point.substeps_per_rad / 2.0, verify=True)
-    except (np.linalg.LinAlgError, FloatingPointError, ValueError, ZeroDivisionError):
-        return None
-
-
-def _floquet_points(structures, cut, rpm, verify):
+def _floquet_points(structures, cut, rpm, verify, frequencies=True, continuation=False):
     """The engine's CriticalPoints, or None for a structure it could not solve (a numerical
     failure in one structure must not take the batch down: the batch is retried one by one)."""
     try:
-        return floquet.critical_depths(structures, cut, rpm, rel_tol=REL_TOL, verify=verify)
+        return floquet.critical_depths(structures, cut, rpm, rel_tol=REL_TOL, verify=verify, frequencies=frequencies, continuation=continuation)
     except (np.linalg.LinAlgError, FloatingPointError, ValueError, ZeroDivisionError):
         if len(structures) == 1:
             return [None]
-        return [_floquet_points([s], cut, [r], verify)[0] for s, r in zip(structures, rpm)]
+        return [_floquet_points([s], cut, [r], verify, frequencies)[0] for s, r in zip(structures, rpm)]
 
 
 def _converged_or_flagged(point, frequencies: bool) -> StabilityResult:

@@ -89,6 +89,7 @@ reduced one, so the reported depth and frequency are those of the full model eit
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass
 
@@ -120,6 +121,11 @@ PRUNE_ABOVE = 2.5
 PROJECT_SEEDS = True
 BAND_GAP = 4.0
 BAND_WIDEN = 3.0
+#: Where the answer needed FINE_CHECK sub-steps per radian or more (sharp force changes: one tooth,
+#: low immersion), the coarse cut model of the winding count can lack a lower branch altogether:
+#: the count is repeated at half the answer's resolution, and where it is not 0 the point is
+#: solved again from that resolution (seeds, count and repair there).
+FINE_CHECK = 4.0 * SUBSTEPS_PER_RAD
 #: Newton tolerance (relative step) of the refinements after the seed search.
 REFINE_TOL = 1e-6
 #: Seed pruning: (iteration, |g|) pairs; a seed with |g| above the bound at or after the
@@ -131,10 +137,10 @@ NEAR_TIE = 0.10
 #: the free structure's multiplier angles; the grid is then refined adaptively).
 VERIFY_POINTS = 64
 #: The winding count's interpolant of M (`monodromy_polynomial`): roots of unity (first, most),
-#: the coefficient tail it must reach (relative), and the largest (2n)^2 x error bound x
-#: |(I - nu M)^-1|_F a sample may have (Rouche: below ln 2, |h_interpolated / h - 1| < 1).
+#: the coefficient tail below which it is tried (relative), and the largest (2n)^2 x error bound
+#: x |(I - nu M)^-1|_F a sample may have (Rouche: below ln 2, |h_interpolated / h - 1| < 1).
 INTERP_NODES = (32, 128)
-INTERP_TOL = 1e-10
+INTERP_TOL = 1e-6
 INTERP_SAFE = 0.5
 #: The winding count is taken at this fraction of the reported depth.
 VERIFY_FRACTION = 0.98
@@ -162,6 +168,7 @@ class CriticalPoint:
     verified: bool | None = None
     branches: tuple = ()
     repaired: bool = False
+    starts: tuple = ()  # (depth, theta) of every boundary point the search converged on: where a similar structure starts (continuation)
 
 
 @dataclass(frozen=True, eq=False)
@@ -712,33 +719,33 @@ def _prune(a, theta, g, done, dead, group):
         dead[act[same]] = True
 
 
-def monodromy_polynomial(char: FloquetCharacteristic, a: float, tau: float):
-    """nu -> M(a (1 - nu)) as a polynomial: M is entire in c, so its Taylor coefficients in nu are
-    the Fourier coefficients of its values on the unit circle, and they fall off like s^k / k!
-    (measured on the issue-17 structure, 300-12,000 rpm, a/D 0.05-1: below 1e-10 of the largest
-    after 16-32 terms). Sampled at N roots of unity, N from INTERP_NODES[0] doubling to
-    INTERP_NODES[1] (N / 2 + 1 monodromies: M(conj c) = conj M(c) for the real structure), the
-    coefficients by FFT. Returns (coefficients (K, 2n, 2n), absolute error bound of the
-    interpolant or inf where the upper half of the coefficients never fell below INTERP_TOL of
-    the largest, the samples on the uniform grid of [0, pi] (theta, M))."""
-    N = INTERP_NODES[0]
-    half = char.monodromy(a * (1.0 - np.exp(-2j * np.pi * np.arange(N // 2 + 1) / N)), np.full(N // 2 + 1, tau))
-    while True:
-        with np.errstate(all="ignore"):
-            coef = np.fft.ifft(np.concatenate([half, np.conj(half[1 : N // 2][::-1])]), axis=0)
-        size = np.abs(coef).max(axis=(1, 2))
-        tail = size[N // 2 :].sum()
-        if np.all(np.isfinite(size)) and tail <= INTERP_TOL * size.max():
-            # aliasing of the coefficients beyond N: bounded by (twice) the tail, which falls off
-            # faster than geometrically; the interpolant keeps the lower half
-            return coef[: N // 2], 2.0 * tail, (2.0 * np.pi * np.arange(N // 2 + 1) / N, half)
-        if N >= INTERP_NODES[1] or not np.all(np.isfinite(half)):
-            return None, np.inf, (2.0 * np.pi * np.arange(N // 2 + 1) / N, half)
-        odd = 2.0 * np.pi * np.arange(1, N, 2) / (2 * N)
-        merged = np.empty((N + 1,) + half.shape[1:], dtype=complex)
-        merged[0::2] = half
-        merged[1::2] = char.monodromy(a * (1.0 - np.exp(-1j * odd)), np.full(len(odd), tau))
-        half, N = merged, 2 * N
+def unit_circle_monodromies(char: FloquetCharacteristic, a: float, tau: float, N: int, half=None) -> np.ndarray:
+    """M(a (1 - nu)) at the N-th roots of unity nu = exp(-2 pi i j / N), j = 0 .. N / 2 (the others
+    are their conjugates: M(conj c) = conj M(c) for the real structure); `half`: those of N / 2
+    roots, reused (only the odd j are computed)."""
+    if half is None:
+        return char.monodromy(a * (1.0 - np.exp(-2j * np.pi * np.arange(N // 2 + 1) / N)), np.full(N // 2 + 1, tau))
+    odd = 2.0 * np.pi * np.arange(1, N // 2, 2) / N
+    merged = np.empty((N // 2 + 1,) + half.shape[1:], dtype=complex)
+    merged[0::2] = half
+    merged[1::2] = char.monodromy(a * (1.0 - np.exp(-1j * odd)), np.full(len(odd), tau))
+    return merged
+
+
+def monodromy_polynomial(half: np.ndarray, N: int):
+    """nu -> M(a (1 - nu)) as a polynomial from `unit_circle_monodromies`: M is entire in c, so its
+    Taylor coefficients in nu are the Fourier coefficients of its values on the unit circle (FFT),
+    and they fall off like s^k / k! (the issue-17 structure, 300-12,000 rpm, a/D 0.05-1: below
+    1e-8 of the largest after 16 terms, 1e-15 after 32). Returns (the lower N / 2 coefficients
+    (K, 2n, 2n), a bound on the interpolant's entry error: twice the upper half, which is all that
+    aliasing and truncation leave out; inf where that half is not below INTERP_TOL of the
+    largest coefficient or not finite)."""
+    with np.errstate(all="ignore"):
+        coef = np.fft.ifft(np.concatenate([half, np.conj(half[1 : N // 2][::-1])]), axis=0)
+    size = np.abs(coef).max(axis=(1, 2))
+    tail = size[N // 2 :].sum()
+    good = np.all(np.isfinite(size)) and tail <= INTERP_TOL * size.max()
+    return coef[: N // 2], (2.0 * tail if good else np.inf)
 
 
 def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int | None = None, max_points: int = 4096, extra=()):
@@ -751,45 +758,52 @@ def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int
     `start` (VERIFY_POINTS) points, e.g. the known boundary points and the free multipliers'
     angles, where the phase turns fastest.
 
-    h is evaluated on `monodromy_polynomial` (17-33 monodromies for the whole count instead of
+    h is evaluated on `monodromy_polynomial` (17 or 33 monodromies for the whole count instead of
     one per sample), each sample's error checked: (2n)^2 x the interpolant's entry error bound x
     |(I - nu M)^-1|_F must stay below INTERP_SAFE (then |h_interpolated / h - 1| < 1, and both have
-    the same zeros in the disk: Rouche). Where the polynomial does not converge or a
-    sample fails the check, the count samples M directly (from the polynomial's exact samples)."""
-    coef, bound, (grid, exact) = monodromy_polynomial(char, a, tau)
-    n2 = exact.shape[-1]
-    eye = np.eye(n2)
+    the same zeros in the disk: Rouche). Where a sample fails the check, the roots of unity double
+    (to INTERP_NODES[1]); after that the count samples M directly (from the exact samples)."""
+    th = np.linspace(0.0, np.pi, VERIFY_POINTS if start is None else start)
+    extra = np.mod(np.asarray(extra, dtype=float).reshape(-1), 2.0 * np.pi)
+    extra = np.where(extra > np.pi, 2.0 * np.pi - extra, extra)
+    if len(extra):
+        th = np.unique(np.concatenate([th, extra]))
+    N, half = INTERP_NODES[0], None
+    while True:
+        half = unit_circle_monodromies(char, a, tau, N, half)
+        n2 = half.shape[-1]
+        eye = np.eye(n2)
+        coef, bound = monodromy_polynomial(half, N)
+
+        def interpolated(t, coef=coef, bound=bound):
+            nu = np.exp(-1j * t)
+            M = (nu[:, None] ** np.arange(len(coef))[None, :] @ coef.reshape(len(coef), -1)).reshape(len(t), n2, n2)
+            D = eye - nu[:, None, None] * M
+            with np.errstate(all="ignore"):
+                sign, logdet = np.linalg.slogdet(D)
+                inverse = _solve_each(D, np.broadcast_to(eye, D.shape))
+            if not np.all(np.linalg.norm(inverse, axis=(1, 2)) * bound * n2**2 < INTERP_SAFE):
+                raise _Unsafe
+            return np.angle(sign), logdet
+
+        if np.isfinite(bound):
+            try:
+                return _winding(interpolated, th, max_points)
+            except _Unsafe:
+                pass
+        if N >= INTERP_NODES[1] or not np.all(np.isfinite(half)):
+            break
+        N *= 2
 
     def direct(t):
         M = char.monodromy(a * (1.0 - np.exp(-1j * t)), np.full(len(t), tau))
         sign, logdet = np.linalg.slogdet(eye - np.exp(-1j * t)[:, None, None] * M)
         return np.angle(sign), logdet
 
-    def interpolated(t):
-        nu = np.exp(-1j * t)
-        M = (nu[:, None] ** np.arange(len(coef))[None, :] @ coef.reshape(len(coef), -1)).reshape(len(t), n2, n2)
-        D = eye - nu[:, None, None] * M
-        with np.errstate(all="ignore"):
-            sign, logdet = np.linalg.slogdet(D)
-            inverse = _solve_each(D, np.broadcast_to(eye, D.shape))
-        safe = np.linalg.norm(inverse, axis=(1, 2)) * bound * n2**2 < INTERP_SAFE
-        if not np.all(safe):
-            raise _Unsafe
-        return np.angle(sign), logdet
-
-    th = np.linspace(0.0, np.pi, VERIFY_POINTS if start is None else start)
-    extra = np.mod(np.asarray(extra, dtype=float).reshape(-1), 2.0 * np.pi)
-    extra = np.where(extra > np.pi, 2.0 * np.pi - extra, extra)
-    if len(extra):
-        th = np.unique(np.concatenate([th, extra]))
-    try:
-        if coef is None:
-            raise _Unsafe
-        return _winding(interpolated, th, max_points)
-    except _Unsafe:
-        sign, logdet = np.linalg.slogdet(eye - np.exp(-1j * grid)[:, None, None] * exact)
-        known = (grid, np.angle(sign), logdet)
-        return _winding(direct, np.setdiff1d(th, grid), max_points, known)
+    grid = 2.0 * np.pi * np.arange(N // 2 + 1) / N
+    with np.errstate(all="ignore"):
+        sign, logdet = np.linalg.slogdet(eye - np.exp(-1j * grid)[:, None, None] * half)
+    return _winding(direct, np.setdiff1d(th, grid), max_points, (grid, np.angle(sign), logdet))
 
 
 class _Unsafe(Exception):
@@ -906,10 +920,23 @@ def critical_depth(dyn: ToolTipDynamics, cut: Cut, rpm: float, rel_tol: float = 
     return _solve([dyn], cut, np.array([float(rpm)]), rel_tol, substeps_per_rad, verify)[0][0]
 
 
-def critical_depths(structures, cut: Cut, rpm, rel_tol: float = 0.02, substeps_per_rad: float | None = None, verify: bool = False) -> list:
+#: Continuation (`critical_depths(..., continuation=True)`): along a path through the
+#: structures of a group (`modal_path`), every CONTINUATION_STRIDE-th is solved from the seeds,
+#: the others from the boundary points of the nearest of those on the path (same speed),
+#: verified by the winding count. Measured on the sweep's twin poses: no retries at 8.
+CONTINUATION_STRIDE = 8
+
+
+def critical_depths(structures, cut: Cut, rpm, rel_tol: float = 0.02, substeps_per_rad: float | None = None, verify: bool = False,
+                    frequencies: bool = True, continuation: bool = False) -> list:
     """`critical_depth` for many structures (e.g. one per pose), each at its own speed (`rpm`
     scalar or one per structure). Structures with the same number of modes share the batched
-    Newton iterations."""
+    Newton iterations. `frequencies` False skips the chatter frequencies (NaN).
+
+    `continuation`: structures with similar modes (the poses of a sweep, samples of one pose's
+    uncertainty) start from each other's boundary points instead of the seeds: the same
+    answers (each verified by the winding count; a count that is not 0 sends it back to the
+    seeds) at about half the cost."""
     structures = list(structures)
     rpm = np.broadcast_to(np.asarray(rpm, dtype=float), (len(structures),))
     out = [None] * len(structures)
@@ -917,14 +944,45 @@ def critical_depths(structures, cut: Cut, rpm, rel_tol: float = 0.02, substeps_p
     for i, s in enumerate(structures):
         groups.setdefault(s.n_modes, []).append(i)
     for idx in groups.values():
-        res = _solve([structures[i] for i in idx], cut, rpm[idx], rel_tol, substeps_per_rad, verify, pairs=True)
-        for i, r in zip(idx, res):
-            out[i] = r[0]
+        idx = np.array(idx)
+        if continuation:
+            idx = idx[modal_path([structures[i] for i in idx])]
+        anchors = np.unique(np.concatenate([np.arange(0, len(idx), CONTINUATION_STRIDE), [len(idx) - 1]])) if continuation else np.arange(len(idx))
+        for k, r in zip(anchors, _solve([structures[i] for i in idx[anchors]], cut, rpm[idx[anchors]], rel_tol, substeps_per_rad, verify, pairs=True, frequencies=frequencies)):
+            out[idx[k]] = r[0]
+        rest = np.setdiff1d(np.arange(len(idx)), anchors)
+        if len(rest):
+            near = anchors[np.argmin(np.abs(anchors[None, :] - rest[:, None]), axis=1)]
+            hints = [list(out[idx[k]].starts) if rpm[idx[k]] == rpm[idx[i]] else None for k, i in zip(near, rest)]
+            for k, r in zip(rest, _solve([structures[i] for i in idx[rest]], cut, rpm[idx[rest]], rel_tol, substeps_per_rad, verify, pairs=True,
+                                         hints=hints, frequencies=frequencies)):
+                out[idx[k]] = r[0]
     return out
 
 
+def modal_path(structures) -> np.ndarray:
+    """An order of structures with equal mode counts in which neighbours have similar modes:
+    greedy nearest neighbour from the first, distance between (ln fn, ln zeta, tool-tip shapes
+    relative to the largest) vectors."""
+    if len(structures) < 3:
+        return np.arange(len(structures))
+    shapes = np.array([d.shapes.ravel() for d in structures])
+    features = np.hstack([np.log([d.fn_hz for d in structures]), np.log([d.zeta for d in structures]), shapes / max(np.abs(shapes).max(), 1e-300)])
+    left = np.ones(len(structures), bool)
+    order = [0]
+    left[0] = False
+    for _ in range(len(structures) - 1):
+        d = np.abs(features - features[order[-1]]).sum(axis=1)
+        d[~left] = np.inf
+        order.append(int(np.argmin(d)))
+        left[order[-1]] = False
+    return np.array(order)
+
+
 def lobes(dyn: ToolTipDynamics, cut: Cut, rpm, rel_tol: float = 0.02, substeps_per_rad: float | None = None, verify: bool = False) -> Lobes:
-    """`critical_depth` at many speeds, Newton iterations batched over speeds."""
+    """`critical_depth` at many speeds, Newton iterations batched over speeds. (Continuation from
+    neighbouring speeds does not pay: with kHz spindle modes at low speed consecutive speeds of a
+    lobe diagram lie on different lobes, lobe numbers of 80 and more.)"""
     rpm = np.atleast_1d(np.asarray(rpm, dtype=float))
     points = _solve([dyn], cut, rpm, rel_tol, substeps_per_rad, verify, branch_families=False)[0]
     return Lobes(
@@ -962,9 +1020,15 @@ class _Batch:
         return _Batch(self.chars, self.owner[idx])
 
 
-def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branch_families=True):
+def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branch_families=True, hints=None, frequencies=True):
     """pairs=False: every structure at every speed; pairs=True: structure i at rpm[i] only.
-    Returns, per structure, the list of CriticalPoints."""
+    Returns, per structure, the list of CriticalPoints.
+
+    `hints` (continuation; None or one entry per job, None or [(depth m, theta), ...]): the
+    boundary points of a neighbouring structure (a nearby pose) at the same speed. A hinted job
+    starts Newton from them instead of the zeroth-order, flip and band seeds; it is always
+    verified by the winding count, and a job whose count is not 0 is solved again from the seeds.
+    `frequencies` False: no chatter frequencies (NaN; the families are a tenth of a solve)."""
     rpm = np.asarray(rpm, dtype=float).reshape(-1)
     if np.any(~np.isfinite(rpm) | (rpm <= 0)):
         raise InputError("spindle speeds > 0 rpm", got=rpm[~np.isfinite(rpm) | (rpm <= 0)][0], column="rpm")
@@ -988,7 +1052,16 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
     tau_all = np.asarray(cut.tooth_period_s(rpm), dtype=float).reshape(-1)
     # 1. zeroth-order seeds: per mode band the lowest few, overall the lowest MAX_SEEDS
     seed_job, seed_a, seed_t, seed_m = [], [], [], []
+    hinted = np.zeros(len(jobs), bool)
     for j, (s, e) in enumerate(jobs):
+        if hints is not None and hints[j]:
+            hinted[j] = True
+            for a_, th in hints[j]:
+                seed_job.append(j)
+                seed_a.append(float(a_))
+                seed_t.append(float(th))
+                seed_m.append(-1)
+            continue
         d, t, mode = zoa_seeds(smalls[s], cut, tau_all[e], char(s, 0))
         pick = set(np.argsort(d)[:MAX_SEEDS].tolist())
         for m in np.unique(mode):
@@ -1002,7 +1075,8 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
     if FLIP_POINTS:  # period-doubling seeds, which the zeroth order never gives (mode -1: the whole structure)
         lowest = {}
         for j, a_ in zip(seed_job, seed_a):
-            lowest[j] = min(lowest.get(j, np.inf), a_)
+            if not hinted[j]:
+                lowest[j] = min(lowest.get(j, np.inf), a_)
         for s in range(len(dyns)):
             mine = [j for j in range(len(jobs)) if jobs[j][0] == s and np.isfinite(lowest.get(j, np.inf))]
             if mine:
@@ -1074,7 +1148,20 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
         keep = _dedupe(a0[m], t0[m], index=True)
         m = m[keep]
         cands.append((a0[m], np.where(t0[m] > np.pi, 2 * np.pi - t0[m], t0[m]), [v0[i] for i in m], np.where(t0[m] > np.pi, np.conj(g0[m]), g0[m])))
-    points = _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol, verify, seed_level, branch_families)
+    points = _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol, verify, seed_level, branch_families, hinted, frequencies)
+    points = [p if p is None else dataclasses.replace(p, starts=tuple(zip(c[0].tolist(), c[1].tolist()))) for p, c in zip(points, cands)]
+    for j, (s, e) in enumerate(jobs):  # the count at half the answer's resolution where it needed a fine cut model
+        p = points[j]
+        if p is not None and (verify or hinted[j]) and np.isfinite(p.depth_m) and p.substeps_per_rad >= FINE_CHECK and p.substeps_per_rad / 2.0 > base:
+            level = int(round(np.log2(p.substeps_per_rad / 2.0 / base)))
+            count, resolved, _ = unstable_count(char(s, level, True), VERIFY_FRACTION * p.depth_m, tau_all[e], extra=[b[2] for b in p.branches])
+            if not (count == 0 and resolved):
+                points[j] = _solve([dyns[s]], cut, rpm[[e]], rel_tol, p.substeps_per_rad / 2.0, True, True, branch_families, frequencies=frequencies)[0][0]
+    again = [j for j in range(len(jobs)) if points[j] is None]
+    if again:  # hinted jobs the count did not verify: from the seeds
+        redo = _solve([dyns[jobs[j][0]] for j in again], cut, rpm[[jobs[j][1] for j in again]], rel_tol, substeps_per_rad, verify, True, branch_families, frequencies=frequencies)
+        for j, r in zip(again, redo):
+            points[j] = r[0]
     results = [[None] * (len(rpm) if not pairs else 1) for _ in dyns]
     for j, (s, e) in enumerate(jobs):
         results[s][0 if pairs else e] = points[j]
@@ -1105,11 +1192,15 @@ def _batched_step(char, keeps, level, a, t, tau, owner, Gc, vec, full=False):
     return a_new, t_new, ok, Gc_new, vec_new
 
 
-def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol, verify, seed_level, branch_families=True):
+def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol, verify, seed_level, branch_families=True, hinted=None, frequencies=True):
     """From the converged seed-search points of every job: band candidates re-solved on the whole
     structure, near ties (NEAR_TIE) brought to level 0, verified there (winding count, job by
     job), refined in resolution until the error estimate is below rel_tol / 2, put back on the
-    full structure (irrelevant modes), chatter frequency. Newton steps batched over jobs."""
+    full structure (irrelevant modes), chatter frequency. Newton steps batched over jobs. A
+    `hinted` job is always verified; where its count is not 0 its point is None (the caller
+    solves it again from the seeds)."""
+    hinted = np.zeros(len(jobs), bool) if hinted is None else hinted
+    retry = np.zeros(len(jobs), bool)
     J = len(jobs)
     repaired = np.zeros(J, bool)
     verified = [None] * J
@@ -1165,9 +1256,11 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
     while level < 0 and len(ej):
         ea, et, _, Gc, vec = _batched_step(char, keeps, level, ea, et, etau, owner, Gc, vec)
         level += 1
-    if verify:
+    if verify or hinted.any():
         add_j, add_a, add_t = [], [], []
         for j, (s, e) in enumerate(jobs):
+            if not (verify or hinted[j]):
+                continue
             tau = tau_all[e]
             c0 = char(s, 0, True)
             mine = np.flatnonzero(ej == j)
@@ -1177,6 +1270,9 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
                 count, resolved, _ = unstable_count(c0, VERIFY_FRACTION * top, tau, extra=np.concatenate([et[mine], lam0.imag * tau]))
             else:
                 count, resolved = 1, True
+            if (count > 0 or not resolved) and hinted[j]:
+                retry[j] = True
+                continue
             if count > 0 or not resolved:
                 extra = _repair(c0, tau, top)
                 if extra is not None:
@@ -1199,7 +1295,7 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
     for j in range(J):
         mine = np.flatnonzero(ej == j)
         if len(mine):
-            keep_el[mine] = ea[mine] <= ea[mine].min() * (1.0 + NEAR_TIE)
+            keep_el[mine] = (ea[mine] <= ea[mine].min() * (1.0 + NEAR_TIE)) & ~retry[j]
     sel = np.flatnonzero(keep_el)
     ej, ea, et, owner, etau, Gc = ej[sel], ea[sel], et[sel], owner[sel], etau[sel], Gc[sel]
     vec = None if vec is None else [vec[i] for i in sel]
@@ -1251,7 +1347,7 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
     for j, (s, e) in enumerate(jobs):
         mine = np.flatnonzero(ej == j)
         for rank, i in enumerate(mine[np.argsort(ea[mine])]):
-            if rank == 0 or branch_families:  # lobes: the lowest branch's frequency only
+            if frequencies and (rank == 0 or branch_families):  # or the lowest branch's frequency only
                 wanted.setdefault((s, int(level_job[j])), []).append(i)
     family_of = {}
     for (s, lv), members in wanted.items():
@@ -1260,6 +1356,9 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
             family_of[int(i)] = fam
     points = []
     for j, (s, e) in enumerate(jobs):
+        if retry[j]:
+            points.append(None)
+            continue
         mine = np.flatnonzero(ej == j)
         r = float(rpm[e])
         if not len(mine):  # no boundary point found: proven absent only where no cutting force reaches the structure
