@@ -44,7 +44,7 @@ def test_the_count_is_the_number_of_multipliers_outside_the_circle(case):
 
 
 def test_the_interpolated_count_is_the_directly_sampled_one(monkeypatch):
-    """Forcing the fallback (no interpolant converges with 4 nodes) samples M directly; both paths
+    """Forcing the fallback (no segment interpolant converges with 2 nodes) samples M directly; both paths
     give the same count on the robot-plus-spindle structure of issue 17 below and above its
     critical depth (1.516 mm at 2000 rpm), where the count is 0 and then grows."""
     from test_stability_multiscale import CUT, TABLE, structure
@@ -53,7 +53,7 @@ def test_the_interpolated_count_is_the_directly_sampled_one(monkeypatch):
     tau = float(CUT.tooth_period_s(2000.0))
     depths = [0.5e-3, 1.48e-3, 1.6e-3, 3e-3, 6e-3]
     interpolated = [floquet.unstable_count(char, a, tau)[:2] for a in depths]
-    monkeypatch.setattr(floquet, "INTERP_NODES", (4, 4))
+    monkeypatch.setattr(floquet, "SUBSTEP_NODES", (2, 2))
     direct = [floquet.unstable_count(char, a, tau)[:2] for a in depths]
     assert interpolated == direct
     assert [c for c, _ in interpolated][:2] == [0, 0] and all(c > 0 for c, _ in interpolated[2:])

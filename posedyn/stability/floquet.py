@@ -136,10 +136,14 @@ NEAR_TIE = 0.10
 #: Uniform theta samples of the winding count (plus the known boundary points' thetas and
 #: the free structure's multiplier angles; the grid is then refined adaptively).
 VERIFY_POINTS = 64
-#: The winding count's interpolant of M (`monodromy_polynomial`): roots of unity (first, most),
-#: the coefficient tail below which it is tried (relative), and the largest (2n)^2 x error bound
-#: x |(I - nu M)^-1|_F a sample may have (Rouche: below ln 2, |h_interpolated / h - 1| < 1).
-INTERP_NODES = (32, 128)
+#: The winding count's interpolants (`segment_interpolants`, `monodromy_polynomial`): roots of
+#: unity of the segments' exponentials (first, most) and the coefficient tail they must reach
+#: (relative), roots of unity of M (first, most) and the tail below which its polynomial is
+#: tried, and the largest sqrt(2n) |(I - nu M)^-1|_F |dM|_F a sample may have (Rouche: below
+#: ln 2, |h_interpolated / h - 1| < 1).
+SUBSTEP_NODES = (16, 64)
+SUBSTEP_TOL = 1e-12
+INTERP_NODES = (32, 256)
 INTERP_TOL = 1e-6
 INTERP_SAFE = 0.5
 #: The winding count is taken at this fraction of the reported depth.
@@ -267,15 +271,19 @@ class FloquetCharacteristic:
         self.W = np.einsum("ir,sij,jq->srq", turned.force_shapes, H, turned.shapes)
         self.n = n = dyn.n_modes
         K, C = dyn.stiffness_matrix, dyn.damping_matrix
-        self.scale = w = np.sqrt(np.abs(K).max())
+        # balanced per degree of freedom, z = [w q; q'] with w = sqrt(K_ii): a free mode propagates
+        # as a rotation, so products of propagators keep norms near 1 (one scale for all made a
+        # 12 Hz mode's entries 400x its 5 kHz neighbour's)
+        d = np.sqrt(np.abs(np.diag(K)))
+        self.scale = w = np.maximum(d, 1e-12 * d.max())
         A0 = np.zeros((2 * n, 2 * n))
-        A0[:n, n:] = w * np.eye(n)
-        A0[n:, :n] = -K / w
+        A0[:n, n:] = np.diag(w)
+        A0[n:, :n] = -K / w[None, :]
         A0[n:, n:] = -C
         self.A0 = A0
         self.force_shapes = turned.force_shapes
         self.S = np.zeros((2, 2 * n))  # balanced state -> tool tip
-        self.S[:, :n] = turned.shapes / w
+        self.S[:, :n] = turned.shapes / w[None, :]
 
     def free_eig(self):
         """Eigen-decomposition of A0 (cached)."""
@@ -305,12 +313,19 @@ class FloquetCharacteristic:
         n = self.n
         c = _complex_or_real(c)
         A = np.broadcast_to(self.A0, (len(self.fraction), len(c), 2 * n, 2 * n)).astype(c.dtype)
-        A[:, :, n:, :n] -= c[None, :, None, None] * self.W[:, None] / self.scale
+        A[:, :, n:, :n] -= c[None, :, None, None] * self.W[:, None] / self.scale[None, None, None, :]
         return A
 
     def monodromy(self, c: np.ndarray, tau: np.ndarray) -> np.ndarray:
-        """M(c) over one tooth period tau, (B, 2n, 2n), real for real c (flip: nu = -1). Free-flight
-        segments use A0 (no c)."""
+        """M(c) over one tooth period tau, (B, 2n, 2n), real for real c (flip: nu = -1)."""
+        E = self.exponentials(c, tau)
+        M = E[0]
+        for i in range(1, len(E)):
+            M = E[i] @ M
+        return M
+
+    def exponentials(self, c: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """The segments' exp(A_i(c) dt_i), (segments, B, 2n, 2n); free-flight segments use A0 (no c)."""
         c = _complex_or_real(c)
         tau = np.broadcast_to(np.asarray(tau, dtype=float).reshape(-1), c.shape)
         n2 = 2 * self.n
@@ -324,10 +339,7 @@ class FloquetCharacteristic:
             Af = self.A0[None, None] * (self.fraction[free_idx, None] * utau[None, :])[:, :, None, None]
             Ef = sdm.expm_batched(Af.reshape(-1, n2, n2).astype(c.dtype)).reshape(len(free_idx), len(utau), n2, n2)
             E[free_idx] = Ef[:, inverse.reshape(-1)]
-        M = E[0]
-        for i in range(1, len(E)):
-            M = E[i] @ M
-        return M
+        return E
 
     def log_char(self, a, theta, tau, h: float = 1e-6):
         """ln F and its derivatives in a and theta at nu = exp(-i theta), c = a (1 - nu).
@@ -366,7 +378,7 @@ class ProjectedCharacteristic:
         sel = np.concatenate([[p[0] for p in pairs], [p[1] for p in pairs]]).astype(int)
         self.T, self.Tl, self.lam = V[:, sel], Vinv[sel, :], lam[sel]
         n = full.n
-        self.Bs = -np.einsum("ri,sij,jq->srq", self.Tl[:, n:], full.W, self.T[:n, :]) / full.scale
+        self.Bs = -np.einsum("ri,sij,jq->srq", self.Tl[:, n:], full.W / full.scale[None, None, :], self.T[:n, :])
         self.fraction, self.start, self.cutting = full.fraction, full.start, full.cutting
 
     def monodromy(self, c: np.ndarray, tau: np.ndarray) -> np.ndarray:
@@ -719,33 +731,71 @@ def _prune(a, theta, g, done, dead, group):
         dead[act[same]] = True
 
 
-def unit_circle_monodromies(char: FloquetCharacteristic, a: float, tau: float, N: int, half=None) -> np.ndarray:
-    """M(a (1 - nu)) at the N-th roots of unity nu = exp(-2 pi i j / N), j = 0 .. N / 2 (the others
-    are their conjugates: M(conj c) = conj M(c) for the real structure); `half`: those of N / 2
-    roots, reused (only the odd j are computed)."""
-    if half is None:
-        return char.monodromy(a * (1.0 - np.exp(-2j * np.pi * np.arange(N // 2 + 1) / N)), np.full(N // 2 + 1, tau))
-    odd = 2.0 * np.pi * np.arange(1, N // 2, 2) / N
-    merged = np.empty((N // 2 + 1,) + half.shape[1:], dtype=complex)
-    merged[0::2] = half
-    merged[1::2] = char.monodromy(a * (1.0 - np.exp(-1j * odd)), np.full(len(odd), tau))
-    return merged
+def segment_interpolants(char: FloquetCharacteristic, a: float, tau: float):
+    """Taylor coefficients in nu of every segment's exponential E_s(nu) = exp(dt_s A_s(a (1 - nu))),
+    (segments, K, 2n, 2n), and twice each one's coefficient tail (entry bound of its error on
+    the unit circle), or None. E_s is entire in nu, and as a segment is a fraction of the period
+    its coefficients fall off much faster than those of the monodromy (below 1e-13 after 8 terms
+    on the issue-17 structure, where M needs 16-32): E_s is computed at SUBSTEP_NODES roots of
+    unity (half of them: M(conj c) = conj M(c) for the real structure), doubling until the upper
+    half of its coefficients is below SUBSTEP_TOL of the largest; the FFT gives the rest."""
+    m, E = SUBSTEP_NODES[0], None
+    while True:
+        if E is None:
+            E = char.exponentials(a * (1.0 - np.exp(-2j * np.pi * np.arange(m // 2 + 1) / m)), np.full(m // 2 + 1, tau))
+        else:  # the even roots are the previous ones
+            odd = 2.0 * np.pi * np.arange(1, m // 2, 2) / m
+            merged = np.empty(E.shape[:1] + (m // 2 + 1,) + E.shape[2:], dtype=complex)
+            merged[:, 0::2] = E
+            merged[:, 1::2] = char.exponentials(a * (1.0 - np.exp(-1j * odd)), np.full(len(odd), tau))
+            E = merged
+        with np.errstate(all="ignore"):
+            coef = np.fft.ifft(np.concatenate([E, np.conj(E[:, 1 : m // 2][:, ::-1])], axis=1), axis=1)
+        size = np.abs(coef).max(axis=(2, 3))
+        tail = size[:, m // 2 :].sum(axis=1)
+        if np.all(np.isfinite(size)) and np.all(tail <= SUBSTEP_TOL * size.max(axis=1)):
+            return coef[:, : m // 2], 2.0 * tail
+        if m >= SUBSTEP_NODES[1]:
+            return None
+        m *= 2
+
+
+def circle_monodromies(coef: np.ndarray, error: np.ndarray, N: int):
+    """M = E_S ... E_1 at the N-th roots of unity nu = exp(-2 pi i j / N), j = 0 .. N / 2, from the
+    `segment_interpolants`, and a Frobenius bound of its error: the error of E_s reaches M through
+    the products before and after it, sum over s of 2n x error_s x their Frobenius norms."""
+    nu = np.exp(-2j * np.pi * np.arange(N // 2 + 1) / N)
+    En = (nu[:, None] ** np.arange(coef.shape[1])[None, :] @ coef.reshape(coef.shape[:2] + (-1,))).reshape((len(coef), len(nu)) + coef.shape[2:])
+    before = np.ones((len(En), len(nu)))  # |E_(s-1) ... E_1|_F (1 for none)
+    after = np.ones((len(En), len(nu)))  # |E_S ... E_(s+1)|_F
+    M = En[0]
+    for i in range(1, len(En)):
+        before[i] = np.linalg.norm(M, axis=(1, 2))
+        M = En[i] @ M
+    Q = En[-1]
+    for i in range(len(En) - 2, -1, -1):
+        after[i] = np.linalg.norm(Q, axis=(1, 2))
+        Q = Q @ En[i]
+    with np.errstate(all="ignore"):
+        bound = float((En.shape[-1] * error[:, None] * before * after).sum(axis=0).max())
+    return M, bound
 
 
 def monodromy_polynomial(half: np.ndarray, N: int):
-    """nu -> M(a (1 - nu)) as a polynomial from `unit_circle_monodromies`: M is entire in c, so its
-    Taylor coefficients in nu are the Fourier coefficients of its values on the unit circle (FFT),
-    and they fall off like s^k / k! (the issue-17 structure, 300-12,000 rpm, a/D 0.05-1: below
-    1e-8 of the largest after 16 terms, 1e-15 after 32). Returns (the lower N / 2 coefficients
-    (K, 2n, 2n), a bound on the interpolant's entry error: twice the upper half, which is all that
-    aliasing and truncation leave out; inf where that half is not below INTERP_TOL of the
-    largest coefficient or not finite)."""
+    """nu -> M(a (1 - nu)) as a polynomial from its values at the N-th roots of unity, j = 0 .. N / 2
+    (`circle_monodromies`): M is entire in c, so its Taylor coefficients in nu are the Fourier
+    coefficients of its values on the unit circle (FFT), and they fall off like s^k / k! (the
+    issue-17 structure, 300-12,000 rpm, a/D 0.05-1: below 1e-8 of the largest after 16 terms,
+    1e-15 after 32). Returns (the lower N / 2 coefficients (K, 2n, 2n), a Frobenius bound of the
+    interpolant's error: 2n x twice the upper half, which is all that aliasing and truncation
+    leave out; inf where that half is not below INTERP_TOL of the largest coefficient or not
+    finite)."""
     with np.errstate(all="ignore"):
         coef = np.fft.ifft(np.concatenate([half, np.conj(half[1 : N // 2][::-1])]), axis=0)
     size = np.abs(coef).max(axis=(1, 2))
     tail = size[N // 2 :].sum()
     good = np.all(np.isfinite(size)) and tail <= INTERP_TOL * size.max()
-    return coef[: N // 2], (2.0 * tail if good else np.inf)
+    return coef[: N // 2], (2.0 * half.shape[-1] * tail if good else np.inf)
 
 
 def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int | None = None, max_points: int = 4096, extra=()):
@@ -758,22 +808,26 @@ def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int
     `start` (VERIFY_POINTS) points, e.g. the known boundary points and the free multipliers'
     angles, where the phase turns fastest.
 
-    h is evaluated on `monodromy_polynomial` (17 or 33 monodromies for the whole count instead of
-    one per sample), each sample's error checked: (2n)^2 x the interpolant's entry error bound x
-    |(I - nu M)^-1|_F must stay below INTERP_SAFE (then |h_interpolated / h - 1| < 1, and both have
-    the same zeros in the disk: Rouche). Where a sample fails the check, the roots of unity double
-    (to INTERP_NODES[1]); after that the count samples M directly (from the exact samples)."""
+    h is evaluated on `monodromy_polynomial` (the segments' exponentials at 9-17 points of the
+    circle for the whole count instead of a monodromy per sample), each sample's error checked:
+    sqrt(2n) |(I - nu M)^-1|_F |dM|_F must stay below INTERP_SAFE (then the nuclear norm of
+    (I - nu M)^-1 dM is below ln 2, |h_interpolated / h - 1| < 1, and both have the same zeros
+    in the disk: Rouche). M's roots of unity double from INTERP_NODES[0] (products only) where
+    its polynomial has not converged or a sample fails the check; after INTERP_NODES[1], or
+    where a segment's interpolant does not converge, the count samples M directly."""
     th = np.linspace(0.0, np.pi, VERIFY_POINTS if start is None else start)
     extra = np.mod(np.asarray(extra, dtype=float).reshape(-1), 2.0 * np.pi)
     extra = np.where(extra > np.pi, 2.0 * np.pi - extra, extra)
     if len(extra):
         th = np.unique(np.concatenate([th, extra]))
-    N, half = INTERP_NODES[0], None
-    while True:
-        half = unit_circle_monodromies(char, a, tau, N, half)
+    segments = segment_interpolants(char, a, tau)
+    N = INTERP_NODES[0]
+    while segments is not None and N <= INTERP_NODES[1]:
+        half, product_bound = circle_monodromies(*segments, N)
         n2 = half.shape[-1]
         eye = np.eye(n2)
         coef, bound = monodromy_polynomial(half, N)
+        bound += product_bound
 
         def interpolated(t, coef=coef, bound=bound):
             nu = np.exp(-1j * t)
@@ -782,7 +836,7 @@ def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int
             with np.errstate(all="ignore"):
                 sign, logdet = np.linalg.slogdet(D)
                 inverse = _solve_each(D, np.broadcast_to(eye, D.shape))
-            if not np.all(np.linalg.norm(inverse, axis=(1, 2)) * bound * n2**2 < INTERP_SAFE):
+            if not np.all(np.sqrt(n2) * np.linalg.norm(inverse, axis=(1, 2)) * bound < INTERP_SAFE):
                 raise _Unsafe
             return np.angle(sign), logdet
 
@@ -791,19 +845,14 @@ def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int
                 return _winding(interpolated, th, max_points)
             except _Unsafe:
                 pass
-        if N >= INTERP_NODES[1] or not np.all(np.isfinite(half)):
-            break
         N *= 2
 
     def direct(t):
         M = char.monodromy(a * (1.0 - np.exp(-1j * t)), np.full(len(t), tau))
-        sign, logdet = np.linalg.slogdet(eye - np.exp(-1j * t)[:, None, None] * M)
+        sign, logdet = np.linalg.slogdet(np.eye(M.shape[-1]) - np.exp(-1j * t)[:, None, None] * M)
         return np.angle(sign), logdet
 
-    grid = 2.0 * np.pi * np.arange(N // 2 + 1) / N
-    with np.errstate(all="ignore"):
-        sign, logdet = np.linalg.slogdet(eye - np.exp(-1j * grid)[:, None, None] * half)
-    return _winding(direct, np.setdiff1d(th, grid), max_points, (grid, np.angle(sign), logdet))
+    return _winding(direct, th, max_points)
 
 
 class _Unsafe(Exception):
@@ -834,6 +883,8 @@ def _winding(sample, th, max_points, known=None):
         order = np.argsort(th)
         th, ph, lm = th[order], ph[order], lm[order]
     d = np.angle(np.exp(1j * np.diff(ph)))
+    if not np.all(np.isfinite(d)):  # an overflowing characteristic: no count
+        return 0, False, float("nan")
     count = int(np.rint(-d.sum() / np.pi))
     return count, resolved, float(th[np.argmin(lm)])
 
