@@ -266,9 +266,10 @@ def exponentials(stiffness: np.ndarray, damping: np.ndarray, dt: np.ndarray, ord
 _TAYLOR18 = np.array([1.0 / math.factorial(k) for k in range(19)] + [0.0]).reshape(5, 4)
 THETA18 = 1.090863719290036
 
-#: Matrices per block in `expm_batched`: blocks this small stay in cache (about 3x faster than
-#: one pass over thousands of 20 x 20 matrices).
-EXPM_BLOCK = 128
+#: Bytes per matrix stack in a block of `expm_batched` (16-128 matrices): the temporaries stay
+#: in cache (about 3x faster than one pass over thousands of 20 x 20 matrices; 20-24 square
+#: complex matrices 1.3-1.6x faster in blocks of 32-48 than of 128).
+EXPM_BLOCK_BYTES = 1 << 18
 
 
 def expm_batched(A: np.ndarray) -> np.ndarray:
@@ -276,8 +277,9 @@ def expm_batched(A: np.ndarray) -> np.ndarray:
     blocks of the stack (one scaling per block, from its largest 1-norm). No linear solve: for
     the many small matrices here a batched LU costs as much as 15 products (the [13/13] Pade
     this replaced, 1.5x slower; same results to 1e-14)."""
-    if len(A) > EXPM_BLOCK:
-        return np.concatenate([_expm_block(A[i : i + EXPM_BLOCK]) for i in range(0, len(A), EXPM_BLOCK)])
+    block = int(np.clip(EXPM_BLOCK_BYTES // (A.shape[-1] ** 2 * A.itemsize), 16, 128))
+    if len(A) > block:
+        return np.concatenate([_expm_block(A[i : i + block]) for i in range(0, len(A), block)])
     return _expm_block(A)
 
 
@@ -286,13 +288,14 @@ def _expm_block(A: np.ndarray) -> np.ndarray:
     squarings = max(0, int(np.ceil(np.log2(norm / THETA18)))) if norm > 0 else 0
     if squarings:
         A = A * 0.5**squarings
-    A2 = A @ A
-    A4 = A2 @ A2
-    powers = np.empty((4,) + A.shape, dtype=A.dtype)  # I, A, A^2, A^3
-    powers[0] = np.eye(A.shape[-1])
-    powers[1], powers[2] = A, A2
-    np.matmul(A2, A, out=powers[3])
-    blocks = np.tensordot(_TAYLOR18, powers, axes=1)  # one pass for all twenty coefficients
+    powers = np.empty((3,) + A.shape, dtype=A.dtype)  # A, A^2, A^3
+    powers[0] = A
+    np.matmul(A, A, out=powers[1])
+    np.matmul(powers[1], A, out=powers[2])
+    A4 = powers[1] @ powers[1]
+    blocks = np.tensordot(_TAYLOR18[:, 1:], powers, axes=1)  # one pass for the coefficients of A .. A^3
+    diagonal = np.arange(A.shape[-1])
+    blocks[:, :, diagonal, diagonal] += _TAYLOR18[:, :1, None]  # and of I
     R = blocks[4]
     for j in (3, 2, 1, 0):  # Horner in A^4
         R = A4 @ R
