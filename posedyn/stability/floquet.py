@@ -172,7 +172,7 @@ class CriticalPoint:
     verified: bool | None = None
     branches: tuple = ()
     repaired: bool = False
-    starts: tuple = ()  # (depth, theta) of every boundary point the search converged on: where a similar structure starts (continuation)
+    starts: tuple = ()  # (depth, theta, mode) of every boundary point the search converged on, with the mode its seed came from (-1: the whole structure): where a similar structure starts (continuation)
 
 
 @dataclass(frozen=True, eq=False)
@@ -1075,9 +1075,10 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
     """pairs=False: every structure at every speed; pairs=True: structure i at rpm[i] only.
     Returns, per structure, the list of CriticalPoints.
 
-    `hints` (continuation; None or one entry per job, None or [(depth m, theta), ...]): the
+    `hints` (continuation; None or one entry per job, None or [(depth m, theta, mode), ...]): the
     boundary points of a neighbouring structure (a nearby pose) at the same speed. A hinted job
-    starts Newton from them instead of the zeroth-order, flip and band seeds; it is always
+    starts Newton from them (on the band of the mode, as a zeroth-order seed of that mode would)
+    instead of the zeroth-order, flip and band seeds; it is always
     verified by the winding count, and a job whose count is not 0 is solved again from the seeds.
     `frequencies` False: no chatter frequencies (NaN; the families are a tenth of a solve)."""
     rpm = np.asarray(rpm, dtype=float).reshape(-1)
@@ -1107,11 +1108,11 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
     for j, (s, e) in enumerate(jobs):
         if hints is not None and hints[j]:
             hinted[j] = True
-            for a_, th in hints[j]:
+            for a_, th, mode in hints[j]:  # on the band of the mode the start's seed came from
                 seed_job.append(j)
                 seed_a.append(float(a_))
                 seed_t.append(float(th))
-                seed_m.append(-1)
+                seed_m.append(int(mode) if mode < smalls[s].n_modes else -1)
             continue
         d, t, mode = zoa_seeds(smalls[s], cut, tau_all[e], char(s, 0))
         pick = set(np.argsort(d)[:MAX_SEEDS].tolist())
@@ -1193,14 +1194,15 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
                 if t_[q] > np.pi:
                     v0[i] = np.conj(v0[i])
 
-    cands = []
+    cands, start_of = [], []
     for j in range(len(jobs)):
         m = np.flatnonzero((seed_job == j) & ok0)
         keep = _dedupe(a0[m], t0[m], index=True)
         m = m[keep]
         cands.append((a0[m], np.where(t0[m] > np.pi, 2 * np.pi - t0[m], t0[m]), [v0[i] for i in m], np.where(t0[m] > np.pi, np.conj(g0[m]), g0[m])))
+        start_of.append(tuple(zip(cands[-1][0].tolist(), cands[-1][1].tolist(), seed_m[m].tolist())))
     points = _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol, verify, seed_level, branch_families, hinted, frequencies)
-    points = [p if p is None else dataclasses.replace(p, starts=tuple(zip(c[0].tolist(), c[1].tolist()))) for p, c in zip(points, cands)]
+    points = [p if p is None else dataclasses.replace(p, starts=st) for p, st in zip(points, start_of)]
     for j, (s, e) in enumerate(jobs):  # the count at half the answer's resolution where it needed a fine cut model
         p = points[j]
         if p is not None and (verify or hinted[j]) and np.isfinite(p.depth_m) and p.substeps_per_rad >= FINE_CHECK and p.substeps_per_rad / 2.0 > base:
