@@ -61,7 +61,7 @@ structure) is batched over all jobs (`_finish_all`).
 Verification (`verify=True`): the number of multipliers outside the unit circle at
 VERIFY_FRACTION x the depth is the number of zeros of h(nu) = det(I - nu M(a (1 - nu))) in
 |nu| < 1 (argument principle, `unstable_count`, adaptive theta grid). Count 0 with every grid
-step resolved (< pi/4 in phase, < x4 in modulus) means no boundary point lies below 0.98 x the
+step resolved (< pi/4 in phase, < x4 in modulus) means no boundary point lies below 0.995 x the
 reported depth, up to the resolution of the phase sampling (a zero pair closer to the circle
 than the sampling can see is not excluded) and the coarse level's W(t) error. A non-zero count
 triggers `_repair`: Newton from the thetas where an eigenvalue of M comes nearest 1 / nu at that
@@ -142,12 +142,12 @@ VERIFY_POINTS = 64
 #: tried, and the largest sqrt(2n) |(I - nu M)^-1|_F |dM|_F a sample may have (Rouche: below
 #: ln 2, |h_interpolated / h - 1| < 1).
 SUBSTEP_NODES = (16, 64)
-SUBSTEP_TOL = 1e-12
+SUBSTEP_TOL = 1e-8
 INTERP_NODES = (32, 256)
 INTERP_TOL = 1e-6
 INTERP_SAFE = 0.5
 #: The winding count is taken at this fraction of the reported depth.
-VERIFY_FRACTION = 0.98
+VERIFY_FRACTION = 0.995
 #: Frequency grid: half-width around each mode in units of zeta w, and points per w_T.
 BAND_ZETAS = 8.0
 POINTS_PER_TOOTH_FREQUENCY = 10
@@ -731,33 +731,33 @@ def _prune(a, theta, g, done, dead, group):
         dead[act[same]] = True
 
 
-def segment_interpolants(char: FloquetCharacteristic, a: float, tau: float):
-    """Taylor coefficients in nu of every segment's exponential E_s(nu) = exp(dt_s A_s(a (1 - nu))),
-    (segments, K, 2n, 2n), and twice each one's coefficient tail (entry bound of its error on
-    the unit circle), or None. E_s is entire in nu, and as a segment is a fraction of the period
-    its coefficients fall off much faster than those of the monodromy (below 1e-13 after 8 terms
-    on the issue-17 structure, where M needs 16-32): E_s is computed at SUBSTEP_NODES roots of
-    unity (half of them: M(conj c) = conj M(c) for the real structure), doubling until the upper
-    half of its coefficients is below SUBSTEP_TOL of the largest; the FFT gives the rest."""
-    m, E = SUBSTEP_NODES[0], None
-    while True:
-        if E is None:
-            E = char.exponentials(a * (1.0 - np.exp(-2j * np.pi * np.arange(m // 2 + 1) / m)), np.full(m // 2 + 1, tau))
-        else:  # the even roots are the previous ones
-            odd = 2.0 * np.pi * np.arange(1, m // 2, 2) / m
-            merged = np.empty(E.shape[:1] + (m // 2 + 1,) + E.shape[2:], dtype=complex)
-            merged[:, 0::2] = E
-            merged[:, 1::2] = char.exponentials(a * (1.0 - np.exp(-1j * odd)), np.full(len(odd), tau))
-            E = merged
-        with np.errstate(all="ignore"):
-            coef = np.fft.ifft(np.concatenate([E, np.conj(E[:, 1 : m // 2][:, ::-1])], axis=1), axis=1)
-        size = np.abs(coef).max(axis=(2, 3))
-        tail = size[:, m // 2 :].sum(axis=1)
-        if np.all(np.isfinite(size)) and np.all(tail <= SUBSTEP_TOL * size.max(axis=1)):
-            return coef[:, : m // 2], 2.0 * tail
-        if m >= SUBSTEP_NODES[1]:
-            return None
-        m *= 2
+def segment_samples(char: FloquetCharacteristic, a: float, tau: float, m: int, previous: np.ndarray | None = None) -> np.ndarray:
+    """Every segment's exponential E_s(nu) = exp(dt_s A_s(a (1 - nu))) at the m-th roots of unity
+    nu = exp(-2 pi i j / m), j = 0 .. m / 2 (the others are their conjugates: the structure is
+    real), (segments, m / 2 + 1, 2n, 2n); `previous`: those at m / 2 roots (reused as the even j)."""
+    if previous is None:
+        return char.exponentials(a * (1.0 - np.exp(-2j * np.pi * np.arange(m // 2 + 1) / m)), np.full(m // 2 + 1, tau))
+    odd = 2.0 * np.pi * np.arange(1, m // 2, 2) / m
+    merged = np.empty(previous.shape[:1] + (m // 2 + 1,) + previous.shape[2:], dtype=complex)
+    merged[:, 0::2] = previous
+    merged[:, 1::2] = char.exponentials(a * (1.0 - np.exp(-1j * odd)), np.full(len(odd), tau))
+    return merged
+
+
+def segment_interpolants(E: np.ndarray, m: int):
+    """Taylor coefficients in nu of every segment's exponential from `segment_samples`,
+    (segments, m / 2, 2n, 2n), and twice each one's coefficient tail (entry bound of its error on
+    the unit circle); None where a tail is not below SUBSTEP_TOL of the segment's largest
+    coefficient. E_s is entire in nu, and as a segment is a fraction of the period its
+    coefficients fall off much faster than the monodromy's (1e-11 after 8 terms on the issue-17
+    structure, where M needs 16-32)."""
+    with np.errstate(all="ignore"):
+        coef = np.fft.ifft(np.concatenate([E, np.conj(E[:, 1 : m // 2][:, ::-1])], axis=1), axis=1)
+    size = np.abs(coef).max(axis=(2, 3))
+    tail = size[:, m // 2 :].sum(axis=1)
+    if not (np.all(np.isfinite(size)) and np.all(tail <= SUBSTEP_TOL * size.max(axis=1))):
+        return None
+    return coef[:, : m // 2], 2.0 * tail
 
 
 def circle_monodromies(coef: np.ndarray, error: np.ndarray, N: int):
@@ -812,40 +812,45 @@ def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int
     circle for the whole count instead of a monodromy per sample), each sample's error checked:
     sqrt(2n) |(I - nu M)^-1|_F |dM|_F must stay below INTERP_SAFE (then the nuclear norm of
     (I - nu M)^-1 dM is below ln 2, |h_interpolated / h - 1| < 1, and both have the same zeros
-    in the disk: Rouche). M's roots of unity double from INTERP_NODES[0] (products only) where
-    its polynomial has not converged or a sample fails the check; after INTERP_NODES[1], or
-    where a segment's interpolant does not converge, the count samples M directly."""
+    in the disk: Rouche). M's roots of unity double (INTERP_NODES, products only) until its
+    polynomial converges; the segments' roots double (SUBSTEP_NODES) where a sample fails the
+    check; after that the count samples M directly."""
     th = np.linspace(0.0, np.pi, VERIFY_POINTS if start is None else start)
     extra = np.mod(np.asarray(extra, dtype=float).reshape(-1), 2.0 * np.pi)
     extra = np.where(extra > np.pi, 2.0 * np.pi - extra, extra)
     if len(extra):
         th = np.unique(np.concatenate([th, extra]))
-    segments = segment_interpolants(char, a, tau)
-    N = INTERP_NODES[0]
-    while segments is not None and N <= INTERP_NODES[1]:
-        half, product_bound = circle_monodromies(*segments, N)
-        n2 = half.shape[-1]
-        eye = np.eye(n2)
-        coef, bound = monodromy_polynomial(half, N)
-        bound += product_bound
+    m, E = SUBSTEP_NODES[0], None
+    while m <= SUBSTEP_NODES[1]:
+        E = segment_samples(char, a, tau, m, E)
+        segments = segment_interpolants(E, m)
+        m *= 2
+        N = INTERP_NODES[0]
+        while segments is not None and N <= INTERP_NODES[1]:
+            half, product_bound = circle_monodromies(*segments, N)
+            n2 = half.shape[-1]
+            eye = np.eye(n2)
+            coef, bound = monodromy_polynomial(half, N)
+            if not np.isfinite(bound):  # M's polynomial needs more roots (products only)
+                N *= 2
+                continue
+            bound += product_bound
 
-        def interpolated(t, coef=coef, bound=bound):
-            nu = np.exp(-1j * t)
-            M = (nu[:, None] ** np.arange(len(coef))[None, :] @ coef.reshape(len(coef), -1)).reshape(len(t), n2, n2)
-            D = eye - nu[:, None, None] * M
-            with np.errstate(all="ignore"):
-                sign, logdet = np.linalg.slogdet(D)
-                inverse = _solve_each(D, np.broadcast_to(eye, D.shape))
-            if not np.all(np.sqrt(n2) * np.linalg.norm(inverse, axis=(1, 2)) * bound < INTERP_SAFE):
-                raise _Unsafe
-            return np.angle(sign), logdet
+            def interpolated(t, coef=coef, bound=bound):
+                nu = np.exp(-1j * t)
+                M = (nu[:, None] ** np.arange(len(coef))[None, :] @ coef.reshape(len(coef), -1)).reshape(len(t), n2, n2)
+                D = eye - nu[:, None, None] * M
+                with np.errstate(all="ignore"):
+                    sign, logdet = np.linalg.slogdet(D)
+                    inverse = _solve_each(D, np.broadcast_to(eye, D.shape))
+                if not np.all(np.sqrt(n2) * np.linalg.norm(inverse, axis=(1, 2)) * bound < INTERP_SAFE):
+                    raise _Unsafe
+                return np.angle(sign), logdet
 
-        if np.isfinite(bound):
             try:
                 return _winding(interpolated, th, max_points)
-            except _Unsafe:
-                pass
-        N *= 2
+            except _Unsafe:  # the segments' interpolants are not accurate enough: more roots
+                break
 
     def direct(t):
         M = char.monodromy(a * (1.0 - np.exp(-1j * t)), np.full(len(t), tau))
@@ -1505,10 +1510,10 @@ def _newton_from_nearest(char, tau, a, points: int, starts: int):
 
 
 def _descend(char, tau, a_top):
-    """Where the winding count says multipliers are outside the unit circle at a = 0.98 a_top,
+    """Where the winding count says multipliers are outside the unit circle at a = 0.995 a_top,
     the branch they belong to crossed the circle below: `_newton_from_nearest` at that depth
     (DESCENT_STARTS starts among DESCENT_POINTS thetas) reaches such crossings directly. The lowest
-    crossing below a is accepted when the count at 0.98 x its depth is 0 (otherwise the next round
+    crossing below a is accepted when the count at 0.995 x its depth is 0 (otherwise the next round
     starts from it). About 3 winding counts of work where the bisection takes 10. None when no
     round ends with a zero count."""
     a = VERIFY_FRACTION * a_top
@@ -1550,7 +1555,7 @@ def _bisect_repair(char, tau, a_top):
     # not above hi by more than REPAIR_SLACK (a start that runs to a higher branch is no answer;
     # on a flip lobe, theta = pi, Newton's root at this level can sit just above the bracket the
     # count gives: seen 0.8 % above on seed 002's TMD host at 1900 rpm; the caller's winding
-    # count at 0.98 x the point verifies it)
+    # count at 0.995 x the point verifies it)
     a_r, t_r = _newton_from_nearest(char, tau, hi, BISECT_POINTS, DESCENT_STARTS)
     fit = a_r <= hi * (1.0 + REPAIR_SLACK)
     if not fit.any():
