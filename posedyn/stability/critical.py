@@ -100,14 +100,13 @@ def _sdm_points(structures, cut, rpm, steps, frequencies) -> list[StabilityResul
 
 def critical_lobes(dyn: ToolTipDynamics, cut: Cut, rpm, steps: int | None = None) -> list[StabilityResult]:
     """The StabilityResult of one structure at many speeds (stability lobes): the converged
-    engine's batched `floquet.lobes` by default (converged per speed, but without the multiplier
-    count that rules out a missed lower branch: 300 verified speeds take minutes), the
-    semi-discretization with `steps`."""
+    engine's batched `floquet.lobes` by default, verified per speed by the multiplier count (a
+    speed whose count fails is flagged not converged), the semi-discretization with `steps`."""
     rpm = np.atleast_1d(np.asarray(rpm, dtype=float))
     if steps is not None:
         return critical_points([dyn] * len(rpm), cut, rpm, steps, frequencies=False)
-    lobes = floquet.lobes(dyn, cut, rpm, rel_tol=REL_TOL)  # not verified per speed (about 10x the cost): see the README
+    lobes = floquet.lobes(dyn, cut, rpm, rel_tol=REL_TOL, verify=True)
     return [
-        StabilityResult(float(d), float(f), "floquet", bool(c), float(e))
-        for d, f, c, e in zip(lobes.depth_m, lobes.chatter_hz, lobes.converged, lobes.rel_error_estimate)
+        StabilityResult(float(d), float(f), "floquet", bool(c and v), float(e))
+        for d, f, c, v, e in zip(lobes.depth_m, lobes.chatter_hz, lobes.converged, lobes.verified, lobes.rel_error_estimate)
     ]

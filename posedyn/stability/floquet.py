@@ -63,11 +63,20 @@ VERIFY_FRACTION x the depth is the number of zeros of h(nu) = det(I - nu M(a (1 
 |nu| < 1 (argument principle, `unstable_count`, adaptive theta grid). Count 0 with every grid
 step resolved (< pi/4 in phase, < x4 in modulus) means no boundary point lies below 0.995 x the
 reported depth, up to the resolution of the phase sampling (a zero pair closer to the circle
-than the sampling can see is not excluded) and the coarse level's W(t) error. A non-zero count
-triggers `_repair`: Newton from the thetas where an eigenvalue of M comes nearest 1 / nu at that
-depth (`_descend`; before the flip seeds, period-doubling branches were the usual misses), else
-bisection in depth on the count, then Newton from the nearest multipliers; the result says
-`repaired=True`.
+than the sampling can see is not excluded) and the coarse level's W(t) error; where the answer
+needed FINE_CHECK sub-steps per radian or more, the count is repeated at half its resolution.
+h is sampled on an interpolant (`segment_interpolants`, `circle_monodromies`,
+`monodromy_polynomial`: M(a (1 - nu)) is entire in nu, each segment's exponential needs 8-16
+Taylor terms), every sample with a Rouche bound on the interpolant's error, else directly. A
+non-zero count triggers `_repair`: Newton from the thetas where an eigenvalue of M comes nearest
+1 / nu at that depth (`_descend`; before the flip seeds, period-doubling branches were the usual
+misses), else bisection in depth on the count, then Newton from the nearest multipliers; the
+result says `repaired=True`.
+
+Continuation (`critical_depths(continuation=True)`): structures with similar modes (`modal_path`)
+start Newton from the boundary points a neighbour's search converged on (`CriticalPoint.starts`,
+each on the band of the mode its seed came from) instead of the seeds; such a job is always
+verified, and one whose count is not 0 is solved again from the seeds.
 
 The critical depth is the smallest converged boundary point. Its resolution is chosen, not
 given: the boundary point is found with `SUBSTEPS_PER_RAD` sub-steps per radian of cutting,
@@ -183,6 +192,7 @@ class Lobes:
     theta_rad: np.ndarray
     rel_error_estimate: np.ndarray
     converged: np.ndarray
+    verified: np.ndarray  # per speed: the multiplier count found no lower branch (True where not asked)
 
 
 # --- structure and segments ---------------------------------------------------------------------
@@ -1048,6 +1058,7 @@ def lobes(dyn: ToolTipDynamics, cut: Cut, rpm, rel_tol: float = 0.02, substeps_p
         theta_rad=np.array([p.theta_rad for p in points]),
         rel_error_estimate=np.array([p.rel_error_estimate for p in points]),
         converged=np.array([p.converged for p in points]),
+        verified=np.array([p.verified is not False for p in points]),
     )
 
 
