@@ -437,7 +437,8 @@ def _sample_depths(groups: list[list[ToolTipDynamics]], verify: np.ndarray, conf
     for check in (False, True):
         idx = [q for q, (g, _) in enumerate(flat) if (check or not verify[g]) and (results[q] is None or results[q].converged is False)]
         if idx:
-            solved = critical_points([groups[flat[q][0]][flat[q][1]] for q in idx], config.cut, config.rpm, config.steps, frequencies=False, verify=check)
+            solved = critical_points([groups[flat[q][0]][flat[q][1]] for q in idx], config.cut, config.rpm, config.steps, frequencies=False, verify=check,
+                                     continuation=check)
             for q, r in zip(idx, solved):
                 results[q] = r
     depths = [np.array([results[q].depth_m for q, (g, _) in enumerate(flat) if g == k]) for k in range(len(groups))]

@@ -987,9 +987,10 @@ def critical_depth(dyn: ToolTipDynamics, cut: Cut, rpm: float, rel_tol: float = 
 
 
 #: Continuation (`critical_depths(..., continuation=True)`): along a path through the
-#: structures of a group (`modal_path`), every CONTINUATION_STRIDE-th is solved from the seeds,
-#: the others from the boundary points of the nearest of those on the path (same speed),
-#: verified by the winding count. Measured on the sweep's twin poses: no retries at 8.
+#: structures of a group (`modal_path`), every CONTINUATION_STRIDE-th (an anchor) starts from
+#: the anchor before it (the first from its seeds), the others, batched, from the nearest anchor
+#: (same speed); every one verified by the winding count. Measured on the sweep's twin poses: no
+#: retries at 8.
 CONTINUATION_STRIDE = 8
 
 
@@ -1013,9 +1014,15 @@ def critical_depths(structures, cut: Cut, rpm, rel_tol: float = 0.02, substeps_p
         idx = np.array(idx)
         if continuation:
             idx = idx[modal_path([structures[i] for i in idx])]
-        anchors = np.unique(np.concatenate([np.arange(0, len(idx), CONTINUATION_STRIDE), [len(idx) - 1]])) if continuation else np.arange(len(idx))
-        for k, r in zip(anchors, _solve([structures[i] for i in idx[anchors]], cut, rpm[idx[anchors]], rel_tol, substeps_per_rad, verify, pairs=True, frequencies=frequencies)):
-            out[idx[k]] = r[0]
+        if not continuation:
+            for k, r in enumerate(_solve([structures[i] for i in idx], cut, rpm[idx], rel_tol, substeps_per_rad, verify, pairs=True, frequencies=frequencies)):
+                out[idx[k]] = r[0]
+            continue
+        anchors = np.unique(np.concatenate([np.arange(0, len(idx), CONTINUATION_STRIDE), [len(idx) - 1]]))
+        for q, k in enumerate(anchors):  # each anchor from the one before (the first from its seeds)
+            prev = out[idx[anchors[q - 1]]] if q else None
+            hint = [list(prev.starts)] if prev is not None and rpm[idx[anchors[q - 1]]] == rpm[idx[k]] else None
+            out[idx[k]] = _solve([structures[idx[k]]], cut, rpm[idx[[k]]], rel_tol, substeps_per_rad, verify, pairs=True, frequencies=frequencies, hints=hint)[0][0]
         rest = np.setdiff1d(np.arange(len(idx)), anchors)
         if len(rest):
             near = anchors[np.argmin(np.abs(anchors[None, :] - rest[:, None]), axis=1)]
@@ -1218,7 +1225,10 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
         cands.append((a0[m], np.where(t0[m] > np.pi, 2 * np.pi - t0[m], t0[m]), [v0[i] for i in m], np.where(t0[m] > np.pi, np.conj(g0[m]), g0[m])))
         start_of.append(tuple(zip(cands[-1][0].tolist(), cands[-1][1].tolist(), seed_m[m].tolist())))
     points = _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol, verify, seed_level, branch_families, hinted, frequencies)
-    points = [p if p is None else dataclasses.replace(p, starts=st) for p, st in zip(points, start_of)]
+    # a neighbour starts from every point the search converged on and from the reported branches
+    # (a repaired one included: the seeds of a neighbour would miss it too)
+    points = [p if p is None else dataclasses.replace(p, starts=st + tuple((a, th, -1) for a, _, th in p.branches if not any(abs(a - b) <= 1e-3 * a for b, _, _ in st)))
+              for p, st in zip(points, start_of)]
     for j, (s, e) in enumerate(jobs):  # the count at half the answer's resolution where it needed a fine cut model
         p = points[j]
         if p is not None and (verify or hinted[j]) and np.isfinite(p.depth_m) and p.substeps_per_rad >= FINE_CHECK and p.substeps_per_rad / 2.0 > base:
