@@ -838,27 +838,12 @@ def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int
         N = INTERP_NODES[0]
         while segments is not None and N <= INTERP_NODES[1]:
             half, product_bound = circle_monodromies(*segments, N)
-            n2 = half.shape[-1]
-            eye = np.eye(n2)
             coef, bound = monodromy_polynomial(half, N)
             if not np.isfinite(bound):  # M's polynomial needs more roots (products only)
                 N *= 2
                 continue
-            bound += product_bound
-
-            def interpolated(t, coef=coef, bound=bound):
-                nu = np.exp(-1j * t)
-                M = (nu[:, None] ** np.arange(len(coef))[None, :] @ coef.reshape(len(coef), -1)).reshape(len(t), n2, n2)
-                D = eye - nu[:, None, None] * M
-                with np.errstate(all="ignore"):
-                    sign, logdet = np.linalg.slogdet(D)
-                    inverse = _solve_each(D, np.broadcast_to(eye, D.shape))
-                if not np.all(np.sqrt(n2) * np.linalg.norm(inverse, axis=(1, 2)) * bound < INTERP_SAFE):
-                    raise _Unsafe
-                return np.angle(sign), logdet
-
             try:
-                return _winding(interpolated, th, max_points)
+                return _winding(functools.partial(_interpolated_sample, coef, bound + product_bound), th, max_points)
             except _Unsafe:  # the segments' interpolants are not accurate enough: more roots
                 break
 
@@ -868,6 +853,23 @@ def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int
         return np.angle(sign), logdet
 
     return _winding(direct, th, max_points)
+
+
+def _interpolated_sample(coef: np.ndarray, bound: float, t: np.ndarray):
+    """(phase, ln |h|) of h(nu) = det(I - nu M) on the polynomial M(nu) = sum coef_k nu^k at
+    nu = exp(-i t); raises _Unsafe where sqrt(2n) |(I - nu M)^-1|_F x bound (M's Frobenius error)
+    reaches INTERP_SAFE (`unstable_count`)."""
+    n2 = coef.shape[-1]
+    eye = np.eye(n2)
+    nu = np.exp(-1j * t)
+    M = (nu[:, None] ** np.arange(len(coef))[None, :] @ coef.reshape(len(coef), -1)).reshape(len(t), n2, n2)
+    D = eye - nu[:, None, None] * M
+    with np.errstate(all="ignore"):
+        sign, logdet = np.linalg.slogdet(D)
+        inverse = _solve_each(D, np.broadcast_to(eye, D.shape))
+    if not np.all(np.sqrt(n2) * np.linalg.norm(inverse, axis=(1, 2)) * bound < INTERP_SAFE):
+        raise _Unsafe
+    return np.angle(sign), logdet
 
 
 class _Unsafe(Exception):
