@@ -119,7 +119,7 @@ def test_a_missed_lower_branch_is_repaired_the_same_way_by_descent_and_by_bisect
     slow = floquet.critical_depth(dyn, CUT, 800.0)
     assert fast.repaired and fast.verified and fast.converged
     assert fast.depth_m == pytest.approx(slow.depth_m, rel=1e-9) and fast.theta_rad == pytest.approx(slow.theta_rad, abs=1e-9)
-    assert seeded.verified and seeded.converged and seeded.depth_m == pytest.approx(fast.depth_m, rel=1e-6)
+    assert seeded.verified and seeded.converged and seeded.depth_m == pytest.approx(fast.depth_m, rel=floquet.REFINE_TOL)  # two Newton paths to one point
     if fast.theta_rad == pytest.approx(np.pi):
         assert not seeded.repaired
 

@@ -136,7 +136,7 @@ BAND_WIDEN = 3.0
 #: solved again from that resolution (seeds, count and repair there).
 FINE_CHECK = 4.0 * SUBSTEPS_PER_RAD
 #: Newton tolerance (relative step) of the refinements after the seed search.
-REFINE_TOL = 1e-6
+REFINE_TOL = 1e-4
 #: Seed pruning: (iteration, |g|) pairs; a seed with |g| above the bound at or after the
 #: iteration is dropped (Newton from a good seed is in its quadratic basin by then).
 STALL = ((3, 4.0), (5, 1.0), (8, 0.05))
@@ -181,7 +181,7 @@ class CriticalPoint:
     verified: bool | None = None
     branches: tuple = ()
     repaired: bool = False
-    starts: tuple = ()  # (depth, theta, mode) of every boundary point the search converged on, with the mode its seed came from (-1: the whole structure): where a similar structure starts (continuation)
+    starts: tuple = ()  # (depth, theta, G_c, eigenvector or None) of every boundary point the search converged on and of the branches: where a similar structure starts (continuation)
 
 
 @dataclass(frozen=True, eq=False)
@@ -539,20 +539,23 @@ FLIP_POINTS = 20
 FLIP_RANGE = (0.1, 4.0)
 
 
-def flip_seeds(char, a_scale, tau, jobs) -> list:
+def flip_seeds(char, a_scale, tau, jobs, top: float = FLIP_RANGE[1]) -> list:
     """[(job, depth)] where a real multiplier of M(2 a) passes below -1 between two of the scanned
     depths (the number of real multipliers below -1 grows; often just after a complex pair has
     met on the negative axis), placed by linear interpolation of Re sigma + 1 of the multiplier
     nearest -1; one batch for all the jobs of a structure (depth scale a_scale and delay tau per
-    job)."""
-    grid = np.geomspace(*FLIP_RANGE, FLIP_POINTS)
+    job). Depths FLIP_RANGE[0] to `top` x the scale, FLIP_POINTS over FLIP_RANGE (same spacing
+    for a shorter `top`)."""
+    lo, hi = FLIP_RANGE
+    points = max(2, int(np.ceil((FLIP_POINTS - 1) * np.log(top / lo) / np.log(hi / lo) - 1e-9)) + 1)
+    grid = np.geomspace(lo, top, points)
     a = (np.asarray(a_scale, dtype=float)[:, None] * grid[None, :]).ravel()
     with np.errstate(all="ignore"):
-        sigma = np.linalg.eigvals(char.monodromy(2.0 * a, np.repeat(tau, FLIP_POINTS)))
+        sigma = np.linalg.eigvals(char.monodromy(2.0 * a, np.repeat(tau, points)))
     real = np.abs(sigma.imag) <= 1e-9 * np.maximum(np.abs(sigma), 1e-300)
-    below = (real & (sigma.real < -1.0)).sum(axis=1).reshape(len(jobs), FLIP_POINTS)
-    nearest = sigma[np.arange(len(sigma)), np.argmin(np.abs(sigma + 1.0), axis=1)].real.reshape(len(jobs), FLIP_POINTS) + 1.0
-    a = a.reshape(len(jobs), FLIP_POINTS)
+    below = (real & (sigma.real < -1.0)).sum(axis=1).reshape(len(jobs), points)
+    nearest = sigma[np.arange(len(sigma)), np.argmin(np.abs(sigma + 1.0), axis=1)].real.reshape(len(jobs), points) + 1.0
+    a = a.reshape(len(jobs), points)
     out = []
     for q, j in enumerate(jobs):
         cross = np.flatnonzero(np.diff(below[q]) > 0)
@@ -604,18 +607,22 @@ def _critical_log(char, a, theta, tau, target=None, idx=None, mode=None, vec=Non
     out_g = np.empty(len(a), dtype=complex)
     out_v = np.empty((len(a), M.shape[-1]), dtype=complex)
     todo = rows
-    if vec is not None:
-        vec = vec / np.linalg.norm(vec, axis=1, keepdims=True)
-        if target is not None:
-            sig0 = np.exp(target) / nu
-        else:
-            sig0 = np.einsum("bi,bij,bj->b", np.conj(vec), M, vec)
-        sig_f, v_f, ok_f = _follow_eig(M, vec, sig0)
+    has_vec = np.zeros(len(a), bool)
+    if vec is not None:  # rows without a vector (NaN) pick as if none were given
         with np.errstate(all="ignore"):
-            g_f = np.log(sig_f * nu)
+            vec = vec / np.linalg.norm(vec, axis=1, keepdims=True)
+        has_vec = np.all(np.isfinite(vec), axis=1)
+        fol = rows[has_vec]
+        if target is not None:
+            sig0 = np.exp(target[fol]) / nu[fol]
+        else:
+            sig0 = np.einsum("bi,bij,bj->b", np.conj(vec[fol]), M[fol], vec[fol])
+        sig_f, v_f, ok_f = _follow_eig(M[fol], vec[fol], sig0) if len(fol) else (np.zeros(0, complex), vec[fol], np.zeros(0, bool))
+        with np.errstate(all="ignore"):
+            g_f = np.log(sig_f * nu[fol])
         ok_f &= np.isfinite(g_f)
-        out_g[ok_f], out_v[ok_f] = g_f[ok_f], v_f[ok_f]
-        todo = rows[~ok_f]
+        out_g[fol[ok_f]], out_v[fol[ok_f]] = g_f[ok_f], v_f[ok_f]
+        todo = np.setdiff1d(rows, fol[ok_f])
         if not len(todo):
             return out_g, out_v
     finite = np.all(np.isfinite(M[todo]), axis=(1, 2))  # an overflowing element dies (NaN), not the batch
@@ -632,19 +639,19 @@ def _critical_log(char, a, theta, tau, target=None, idx=None, mode=None, vec=Non
     r = np.arange(len(todo))
     ref = np.zeros(len(todo), dtype=complex) if target is None else target[todo]
     dist = np.abs(lg - ref[:, None])
-    if vec is not None:
-        overlap = np.abs(np.einsum("bi,bij->bj", np.conj(vec[todo]), V))
-        score = overlap / (1.0 + dist)
-        pick = np.argmax(np.where(np.isfinite(score), score, -1.0), axis=1)
-    else:
-        if mode is not None:
-            md = mode[todo]
-            n = M.shape[-1] // 2
-            w = np.abs(V) ** 2
-            share = (w[r, md] + w[r, n + md]) / w.sum(axis=1)
-            share = np.where((md >= 0)[:, None], share, 1.0)
-            dist = np.where(share >= 0.5 * share.max(axis=1, keepdims=True), dist, np.inf)
-        pick = np.argmin(dist, axis=1)
+    if mode is not None:
+        md = mode[todo]
+        n = M.shape[-1] // 2
+        w = np.abs(V) ** 2
+        share = (w[r, md] + w[r, n + md]) / w.sum(axis=1)
+        share = np.where((md >= 0)[:, None], share, 1.0)
+        dist = np.where(share >= 0.5 * share.max(axis=1, keepdims=True), dist, np.inf)
+    pick = np.argmin(dist, axis=1)
+    followed = has_vec[todo]
+    if followed.any():
+        overlap = np.abs(np.einsum("bi,bij->bj", np.conj(vec[todo[followed]]), V[followed]))
+        score = overlap / (1.0 + np.abs(lg[followed] - ref[followed, None]))
+        pick[followed] = np.argmax(np.where(np.isfinite(score), score, -1.0), axis=1)
     out_g[todo], out_v[todo] = lg[r, pick], V[r, :, pick]
     return out_g, out_v
 
@@ -652,7 +659,7 @@ def _critical_log(char, a, theta, tau, target=None, idx=None, mode=None, vec=Non
 def _newton(char, a, theta, tau, iterations: int = 25, tol: float = 1e-8, Gc=None, mode=None, vec=None, group=None):
     """Newton on g(a, theta) = ln(nu sigma(M(a (1 - nu)))) = 0, two real unknowns, batched.
     dg/dnu = 1 / nu exactly; G_c = d ln sigma / dc by one finite difference at the start
-    (or the `Gc` given), then secant (Broyden) updates from the iterates: one monodromy per
+    (where the `Gc` given is not finite), then secant (Broyden) updates from the iterates: one monodromy per
     iteration. `group` (one id per element: the seeds of one job) enables pruning: an element
     is dropped once it heads to a point of its group already converged, once it is more than
     PRUNE_ABOVE x above the group's lowest converged point, or when it stalls (|g| > 1 after 8
@@ -662,34 +669,22 @@ def _newton(char, a, theta, tau, iterations: int = 25, tol: float = 1e-8, Gc=Non
     if not B:
         return a, theta, np.zeros(0, bool), np.zeros(0, complex), None
     g, vec = _critical_log(char, a, theta, tau, mode=None if mode is None else np.asarray(mode, dtype=int).reshape(-1), vec=vec)
-    if Gc is None:
+    Gc = np.full(B, np.nan, complex) if Gc is None else np.broadcast_to(np.asarray(Gc, dtype=complex), (B,)).copy()
+    need = np.flatnonzero(~np.isfinite(Gc))
+    if len(need):  # by one difference where no G_c is given
         h = 1e-4
-        a2 = a * (1.0 + h)
-        g2, _ = _critical_log(char, a2, theta, tau, target=g, vec=vec)
-        nu = np.exp(-1j * theta)
+        g2, _ = _critical_log(char, a[need] * (1.0 + h), theta[need], tau[need], target=g[need], idx=need, vec=vec[need])
         with np.errstate(all="ignore"):
-            Gc = (g2 - g) / (h * a * (1.0 - nu))
-    else:
-        Gc = np.broadcast_to(np.asarray(Gc, dtype=complex), (B,)).copy()
+            Gc[need] = (g2 - g[need]) / (h * a[need] * (1.0 - np.exp(-1j * theta[need])))
     done = np.zeros(B, bool)
     dead = ~np.isfinite(g) | (a <= 0) | ~np.isfinite(Gc)
     for k in range(iterations):
         act = np.flatnonzero(~done & ~dead)
         if not len(act):
             break
-        aa, th, G = a[act], theta[act], Gc[act]
+        aa, th = a[act], theta[act]
         nu = np.exp(-1j * th)
-        ga = G * (1.0 - nu)
-        gt = -1j + G * (1j * aa * nu)
-        J = np.stack([np.stack([ga.real, gt.real], 1), np.stack([ga.imag, gt.imag], 1)], 1)
-        r = np.stack([g[act].real, g[act].imag], 1)
-        with np.errstate(all="ignore"):  # 2 x 2 by Cramer's rule: a singular J marks its element bad, not the batch
-            det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
-            step = -np.stack([J[:, 1, 1] * r[:, 0] - J[:, 0, 1] * r[:, 1], J[:, 0, 0] * r[:, 1] - J[:, 1, 0] * r[:, 0]], 1) / det[:, None]
-        bad = ~np.all(np.isfinite(step), axis=1)
-        step[bad] = 0.0
-        limit = np.maximum(np.abs(step[:, 0]) / (0.3 * aa), np.abs(step[:, 1]) / 0.5)
-        step /= np.maximum(limit, 1.0)[:, None]
+        step, ga, gt, bad = _newton_step(aa, th, Gc[act], g[act])
         a_new, t_new = aa + step[:, 0], th + step[:, 1]
         g_pred = g[act] + ga * step[:, 0] + gt * step[:, 1]
         g_new, v_new = _critical_log(char, a_new, t_new, tau[act], target=g_pred, idx=act, vec=vec[act])
@@ -704,7 +699,12 @@ def _newton(char, a, theta, tau, iterations: int = 25, tol: float = 1e-8, Gc=Non
         Gc[act[ok]] = G_upd[ok]
         a[act], theta[act], g[act] = a_new, t_new, g_new
         small = (np.abs(step[:, 0]) < tol * aa) & (np.abs(step[:, 1]) < tol) & (np.abs(g_new) < 1e-6)
-        done[act[small]] = True
+        # or the next step would be that small: taken without another monodromy
+        nxt, _, _, nbad = _newton_step(a_new, t_new, Gc[act], g_new)
+        last = ~small & ~nbad & (np.abs(nxt[:, 0]) < tol * a_new) & (np.abs(nxt[:, 1]) < tol)
+        a[act[last]] += nxt[last, 0]
+        theta[act[last]] += nxt[last, 1]
+        done[act[small | last]] = True
         dead[act[bad | (a_new <= 0) | ~np.isfinite(g_new) | ((k > 10) & (np.abs(g_new) > 0.5))]] = True
         if group is not None:
             ag = np.abs(g_new)
@@ -713,6 +713,23 @@ def _newton(char, a, theta, tau, iterations: int = 25, tol: float = 1e-8, Gc=Non
     ok = done & ~dead & (a > 0)
     theta = np.mod(theta, 2.0 * np.pi)
     return a, theta, ok, Gc, vec
+
+
+def _newton_step(a, theta, Gc, g):
+    """The Newton step (da, dtheta) on g(a, theta) with dg/da = G_c (1 - nu), dg/dtheta =
+    -i + G_c i a nu, as a 2 x 2 real system (Cramer's rule: a singular one marks its element
+    bad, not the batch), limited to 30 % in a and 0.5 rad. Returns (step, dg/da, dg/dtheta, bad)."""
+    nu = np.exp(-1j * theta)
+    ga = Gc * (1.0 - nu)
+    gt = -1j + Gc * (1j * a * nu)
+    with np.errstate(all="ignore"):
+        det = ga.real * gt.imag - gt.real * ga.imag
+        step = -np.stack([gt.imag * g.real - gt.real * g.imag, ga.real * g.imag - ga.imag * g.real], 1) / det[:, None]
+    bad = ~np.all(np.isfinite(step), axis=1)
+    step[bad] = 0.0
+    limit = np.maximum(np.abs(step[:, 0]) / (0.3 * a), np.abs(step[:, 1]) / 0.5)
+    step /= np.maximum(limit, 1.0)[:, None]
+    return step, ga, gt, bad
 
 
 def _prune(a, theta, g, done, dead, group):
@@ -993,7 +1010,11 @@ def critical_depth(dyn: ToolTipDynamics, cut: Cut, rpm: float, rel_tol: float = 
 #: the anchor before it (the first from its seeds), the others, batched, from the nearest anchor
 #: (same speed); every one verified by the winding count. Measured on the sweep's twin poses: no
 #: retries at 8.
-CONTINUATION_STRIDE = 8
+CONTINUATION_STRIDE = 2
+#: A neighbour's boundary points up to this many times its lowest are continued (Newton on the
+#: whole structure, from the neighbour's G_c); a branch further up that came down past the
+#: lowest would be caught by the count (and the job solved from the seeds).
+START_SPAN = 1.5
 
 
 def critical_depths(structures, cut: Cut, rpm, rel_tol: float = 0.02, substeps_per_rad: float | None = None, verify: bool = False,
@@ -1026,13 +1047,24 @@ def critical_depths(structures, cut: Cut, rpm, rel_tol: float = 0.02, substeps_p
             hint = [list(prev.starts)] if prev is not None and rpm[idx[anchors[q - 1]]] == rpm[idx[k]] else None
             out[idx[k]] = _solve([structures[idx[k]]], cut, rpm[idx[[k]]], rel_tol, substeps_per_rad, verify, pairs=True, frequencies=frequencies, hints=hint)[0][0]
         rest = np.setdiff1d(np.arange(len(idx)), anchors)
-        if len(rest):
-            near = anchors[np.argmin(np.abs(anchors[None, :] - rest[:, None]), axis=1)]
-            hints = [list(out[idx[k]].starts) if rpm[idx[k]] == rpm[idx[i]] else None for k, i in zip(near, rest)]
+        if len(rest):  # from the anchors either side (a branch may take over between them)
+            after = np.searchsorted(anchors, rest)
+            hints = [_union_starts([out[idx[k]].starts for k in anchors[[q - 1, q]] if rpm[idx[k]] == rpm[idx[i]]]) for q, i in zip(after, rest)]
             for k, r in zip(rest, _solve([structures[i] for i in idx[rest]], cut, rpm[idx[rest]], rel_tol, substeps_per_rad, verify, pairs=True,
                                          hints=hints, frequencies=frequencies)):
                 out[idx[k]] = r[0]
     return out
+
+
+def _union_starts(lists) -> list | None:
+    """The starts of several neighbours, one of each boundary point (depth within 2 %, theta
+    within 0.02 rad), or None where there are none."""
+    out = []
+    for starts in lists:
+        for a, th, g, v in starts:
+            if not any(abs(a - b) <= 0.02 * b and abs(th - u) <= 0.02 for b, u, _, _ in out):
+                out.append((a, th, g, v))
+    return out or None
 
 
 def modal_path(structures) -> np.ndarray:
@@ -1128,16 +1160,20 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
         jobs = [(s, e) for s in range(len(dyns)) for e in range(len(rpm))]
     tau_all = np.asarray(cut.tooth_period_s(rpm), dtype=float).reshape(-1)
     # 1. zeroth-order seeds: per mode band the lowest few, overall the lowest MAX_SEEDS
-    seed_job, seed_a, seed_t, seed_m = [], [], [], []
+    seed_job, seed_a, seed_t, seed_m, seed_g, seed_v = [], [], [], [], [], []
     hinted = np.zeros(len(jobs), bool)
     for j, (s, e) in enumerate(jobs):
         if hints is not None and hints[j]:
             hinted[j] = True
-            for a_, th, mode in hints[j]:  # on the band of the mode the start's seed came from
-                seed_job.append(j)
-                seed_a.append(float(a_))
-                seed_t.append(float(th))
-                seed_m.append(int(mode) if mode < smalls[s].n_modes else -1)
+            lowest = min(h[0] for h in hints[j])
+            for a_, th, g_, v_ in hints[j]:  # on the whole structure, from the neighbour's G_c and eigenvector
+                if a_ <= START_SPAN * lowest:
+                    seed_job.append(j)
+                    seed_a.append(float(a_))
+                    seed_t.append(float(th))
+                    seed_m.append(-1)
+                    seed_g.append(complex(g_))
+                    seed_v.append(v_ if v_ is not None and len(v_) == 2 * smalls[s].n_modes else None)
             continue
         d, t, mode = zoa_seeds(smalls[s], cut, tau_all[e], char(s, 0))
         pick = set(np.argsort(d)[:MAX_SEEDS].tolist())
@@ -1149,20 +1185,32 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
         seed_a += list(d[pick])
         seed_t += list(t[pick])
         seed_m += list(mode[pick])
+        seed_g += [np.nan] * len(pick)
+        seed_v += [None] * len(pick)
     if FLIP_POINTS:  # period-doubling seeds, which the zeroth order never gives (mode -1: the whole structure)
+        # (a hinted job too: a flip lobe is an island in depth, unstable between two flip points,
+        # and the count at one depth above it is 0, so a neighbour without it would hide it)
         lowest = {}
         for j, a_ in zip(seed_job, seed_a):
-            if not hinted[j]:
-                lowest[j] = min(lowest.get(j, np.inf), a_)
+            lowest[j] = min(lowest.get(j, np.inf), a_)
+        flips = [(j, t_, a_) for j, t_, a_ in zip(seed_job, seed_t, seed_a) if hinted[j] and abs(t_ - np.pi) < 1e-6]
         for s in range(len(dyns)):
             mine = [j for j in range(len(jobs)) if jobs[j][0] == s and np.isfinite(lowest.get(j, np.inf))]
             if mine:
-                for j, a_ in flip_seeds(char(s, seed_level), np.array([lowest[j] for j in mine]), tau_all[[jobs[j][1] for j in mine]], mine):
+                found = []
+                for span, group in ((FLIP_RANGE[1], [j for j in mine if not hinted[j]]), (START_SPAN, [j for j in mine if hinted[j]])):
+                    if group:
+                        found += flip_seeds(char(s, seed_level), np.array([lowest[j] for j in group]), tau_all[[jobs[j][1] for j in group]], group, span)
+                for j, a_ in found:
+                    if any(jj == j and abs(a_ - b) <= 0.03 * b for jj, _, b in flips):
+                        continue  # already a start
                     seed_job.append(j)
                     seed_a.append(a_)
                     seed_t.append(np.pi)
                     seed_m.append(-1)
-    seed_job, seed_a, seed_t, seed_m = np.array(seed_job, int), np.array(seed_a), np.array(seed_t), np.array(seed_m, int)
+                    seed_g.append(np.nan)
+                    seed_v.append(None)
+    seed_job, seed_a, seed_t, seed_m, seed_g = np.array(seed_job, int), np.array(seed_a), np.array(seed_t), np.array(seed_m, int), np.array(seed_g, complex)
     owners = np.array([jobs[j][0] for j in seed_job], int)
     seed_tau = tau_all[[jobs[j][1] for j in seed_job]] if len(seed_job) else np.zeros(0)
     # the characteristic each seed is refined on: its band's projection, or the whole structure
@@ -1210,7 +1258,8 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
     for sz in np.unique(size):
         sel = np.flatnonzero(size == sz)
         batch = _Batch(search, seed_key[sel])
-        a_, t_, ok_, gc_, vec_ = _newton(batch, seed_a[sel], seed_t[sel], seed_tau[sel], tol=1e-5, mode=seed_mode[sel], group=seed_job[sel])
+        v_in = None if all(seed_v[i] is None for i in sel) else np.array([np.full(sz, np.nan, complex) if seed_v[i] is None else seed_v[i] for i in sel])
+        a_, t_, ok_, gc_, vec_ = _newton(batch, seed_a[sel], seed_t[sel], seed_tau[sel], tol=REFINE_TOL, Gc=seed_g[sel], mode=seed_mode[sel], vec=v_in, group=seed_job[sel])
         a0[sel], t0[sel], ok0[sel], g0[sel] = a_, t_, ok_, gc_
         for q, i in enumerate(sel):
             if ok_[q]:
@@ -1224,12 +1273,13 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
         m = np.flatnonzero((seed_job == j) & ok0)
         keep = _dedupe(a0[m], t0[m], index=True)
         m = m[keep]
-        cands.append((a0[m], np.where(t0[m] > np.pi, 2 * np.pi - t0[m], t0[m]), [v0[i] for i in m], np.where(t0[m] > np.pi, np.conj(g0[m]), g0[m])))
-        start_of.append(tuple(zip(cands[-1][0].tolist(), cands[-1][1].tolist(), seed_m[m].tolist())))
+        cands.append((a0[m], np.where(t0[m] > np.pi, 2 * np.pi - t0[m], t0[m]), [v0[i] for i in m], np.where(t0[m] > np.pi, np.conj(g0[m]), g0[m]),
+                      np.array([isinstance(search[seed_key[i]], ProjectedCharacteristic) for i in m], bool)))
+        start_of.append(tuple(zip(cands[-1][0].tolist(), cands[-1][1].tolist(), cands[-1][3].tolist(), cands[-1][2])))
     points = _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol, verify, seed_level, branch_families, hinted, frequencies)
     # a neighbour starts from every point the search converged on and from the reported branches
     # (a repaired one included: the seeds of a neighbour would miss it too)
-    points = [p if p is None else dataclasses.replace(p, starts=st + tuple((a, th, -1) for a, _, th in p.branches if not any(abs(a - b) <= 1e-3 * a for b, _, _ in st)))
+    points = [p if p is None else dataclasses.replace(p, starts=st + tuple((a, th, np.nan, None) for a, _, th in p.branches if not any(abs(a - b) <= 1e-3 * a for b, *_ in st)))
               for p, st in zip(points, start_of)]
     for j, (s, e) in enumerate(jobs):  # the count at half the answer's resolution where it needed a fine cut model
         p = points[j]
@@ -1286,24 +1336,24 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
     repaired = np.zeros(J, bool)
     verified = [None] * J
     # near ties at the seed level (band searches: twice as wide), flattened
-    ej, ea, et, ev, eg = [], [], [], [], []
-    for j, (ca, ct, cv, cg) in enumerate(cands):
+    ej, ea, et, ev, eg, ep = [], [], [], [], [], []
+    for j, (ca, ct, cv, cg, cp) in enumerate(cands):
         if len(ca):
-            projected = any(v is not None for v in cv)
-            near = np.flatnonzero(ca <= ca[0] * (1.0 + (2.0 if projected else 1.0) * NEAR_TIE))
+            near = np.flatnonzero(ca <= ca[0] * (1.0 + (2.0 if cp.any() else 1.0) * NEAR_TIE))
             ej += [j] * len(near)
             ea += list(ca[near])
             et += list(ct[near])
             ev += [cv[i] for i in near]
             eg += list(cg[near])
+            ep += list(cp[near])
     ej, ea, et = np.array(ej, int), np.array(ea, float), np.array(et, float)
     owner = np.array([jobs[j][0] for j in ej], int)
     etau = np.array([tau_all[jobs[j][1]] for j in ej], float)
-    Gc, vec = np.zeros(len(ej), complex), None
+    Gc, vec = np.array(eg, complex).reshape(-1), None  # searched on the whole structure: as they are
     # candidates of band searches: re-solved on the whole structure, same level
-    lifted = np.flatnonzero([v is not None for v in ev])
-    if len(lifted):
-        for o in np.unique(owner[lifted]):
+    lifted = np.flatnonzero(ep)
+    if len(ej):
+        for o in np.unique(owner[lifted]) if len(lifted) else ():
             ii = lifted[owner[lifted] == o]
             g_in = np.array([eg[i] for i in ii])
             a_f, t_f, ok, g_f, v_f = _newton(char(int(o), seed_level), ea[ii], et[ii], etau[ii], tol=REFINE_TOL, vec=np.array([ev[i] for i in ii]),
