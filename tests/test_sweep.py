@@ -153,7 +153,7 @@ def twin_sweep(tmp_path_factory):
     grid = folder / "grid.toml"
     grid.write_text(GRID.format(twin=TWIN.as_posix()))
     out = folder / "out"
-    sweep_cli("--twin", TWIN, "--grid", grid, "--cut", CUT, "--out", out, "--workers", "1", "--chunk-size", "4", "--json")
+    sweep_cli("--twin", TWIN, "--grid", grid, "--cut", CUT, "--out", out, "--workers", "1", "--chunk-size", "4", "--lobe-speeds", "12", "--json")
     return out
 
 

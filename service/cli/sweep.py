@@ -35,6 +35,7 @@ def sweep(
     chunk_size: int = typer.Option(250, "--chunk-size", min=1, help="Poses per chunk (the unit of work, of writing and of resuming)."),
     robust_samples: int = typer.Option(0, "--robust-samples", min=0, max=2000, help="> 0 (8 or more): the guaranteed depths (95 % lower bounds) over that many samples of each pose's modes, and the robust absorber setting; seconds per pose. Needs a model."),
     lobes: bool = typer.Option(True, "--lobes/--no-lobes", help="Stability lobes at three representative poses in the report."),
+    lobe_speeds: int = typer.Option(40, "--lobe-speeds", min=2, max=2000, help="Speeds of each report lobe (0.5-1.5 x the cut's speed); each is a verified solve without and with the absorber."),
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary instead of the table."),
 ):
     """Sweep the workspace: modes, chatter, absorber field, controller gain and SLE at every pose, on Dask; writes a self-contained HTML report."""
@@ -60,7 +61,7 @@ def sweep(
     with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(), console=console, disable=not show) as bar:
         task = bar.add_task("chunks", total=None)
         outcome = run_sweep(spec, out, workers=workers, scheduler=scheduler, resume=resume, progress=lambda done, total: bar.update(task, completed=done, total=total))
-    lobe_curves = representative_lobes(spec.to_json(), outcome.poses, outcome.rows, outcome.grid_twin) if lobes else []
+    lobe_curves = representative_lobes(spec.to_json(), outcome.poses, outcome.rows, outcome.grid_twin, speeds=lobe_speeds) if lobes else []
     provenance = _provenance(spec, outcome, outcome.grid_twin)
     provenance["software"] = html.software_versions()
     provenance["written"] = html.now_utc()
