@@ -569,13 +569,13 @@ def _flip_grid(a_scale, top: float) -> np.ndarray:
     return np.asarray(a_scale, dtype=float)[:, None] * np.geomspace(lo, top, points)[None, :]
 
 
-def flip_seeds(char, a_scale, tau, jobs, top: float = FLIP_RANGE[1]) -> list:
+def flip_seeds(char, a_scale, tau, jobs) -> list:
     """[(job, depth)] where a real multiplier of M(2 a) passes below -1 between two of the scanned
     depths (the number of real multipliers below -1 grows; often just after a complex pair has
     met on the negative axis), placed by linear interpolation of Re sigma + 1 of the multiplier
     nearest -1; one batch for all the jobs of a structure (depth scale a_scale and delay tau per
-    job), depths FLIP_RANGE[0] to `top` x the scale (`_flip_grid`)."""
-    a = _flip_grid(a_scale, top)
+    job), depths FLIP_RANGE x the scale."""
+    a = _flip_grid(a_scale, FLIP_RANGE[1])
     below, nearest = _flip_scan(char, a, np.asarray(tau, dtype=float))
     out = []
     for q, j in enumerate(jobs):
@@ -1249,22 +1249,14 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
         seed_g += [np.nan] * len(pick)
         seed_v += [None] * len(pick)
     if FLIP_POINTS:  # period-doubling seeds, which the zeroth order never gives (mode -1: the whole structure)
-        # (a hinted job too: a flip lobe is an island in depth, unstable between two flip points,
-        # and the count at one depth above it is 0, so a neighbour without it would hide it)
         lowest = {}
         for j, a_ in zip(seed_job, seed_a):
-            lowest[j] = min(lowest.get(j, np.inf), a_)
-        flips = [(j, t_, a_) for j, t_, a_ in zip(seed_job, seed_t, seed_a) if hinted[j] and abs(t_ - np.pi) < 1e-6]
+            if not hinted[j]:
+                lowest[j] = min(lowest.get(j, np.inf), a_)
         for s in range(len(dyns)):
             mine = [j for j in range(len(jobs)) if jobs[j][0] == s and np.isfinite(lowest.get(j, np.inf))]
             if mine:
-                found = []
-                for span, group in ((FLIP_RANGE[1], [j for j in mine if not hinted[j]]),):
-                    if group:
-                        found += flip_seeds(char(s, seed_level), np.array([lowest[j] for j in group]), tau_all[[jobs[j][1] for j in group]], group, span)
-                for j, a_ in found:
-                    if any(jj == j and abs(a_ - b) <= 0.03 * b for jj, _, b in flips):
-                        continue  # already a start
+                for j, a_ in flip_seeds(char(s, seed_level), np.array([lowest[j] for j in mine]), tau_all[[jobs[j][1] for j in mine]], mine):
                     seed_job.append(j)
                     seed_a.append(a_)
                     seed_t.append(np.pi)
