@@ -1429,7 +1429,7 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
     # candidates of band searches: re-solved on the whole structure, same level
     lifted = np.flatnonzero(ep)
     if len(ej):
-        for o in np.unique(owner[lifted]) if len(lifted) else ():
+        for o in np.unique(owner[lifted]):
             ii = lifted[owner[lifted] == o]
             g_in = np.array([eg[i] for i in ii])
             a_f, t_f, ok, g_f, v_f = _newton(char(int(o), seed_level), ea[ii], et[ii], etau[ii], tol=REFINE_TOL, vec=np.array([ev[i] for i in ii]),
