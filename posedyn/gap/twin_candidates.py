@@ -101,21 +101,28 @@ def twin_candidates(robot: Robot, params: TwinParameters) -> dict[str, Candidate
         return cache[key]
 
     def ratio(m: Measurements, scale, flange_kg: float, softening: float, tip_kg: float) -> np.ndarray:
-        """changed / nominal twin for every fn_hz and k_n_per_m row (1 elsewhere)."""
+        """changed / nominal twin for every fn_hz and k_n_per_m row (1 elsewhere); the twins'
+        tables looked up once per distinct (pose, flange mass), not per row."""
         out = np.ones(len(m))
         q_all = np.column_stack([m.column(c) for c in MODEL_JOINT_COLUMNS])
-        modal = np.isin(m.quantity, ("fn_hz", "k_n_per_m")) & np.all(np.isfinite(q_all), axis=1)
-        flange = np.where(np.isfinite(m.column("device")), m.column("device"), 0.0) * flange_kg
+        modal = np.flatnonzero(np.isin(m.quantity, ("fn_hz", "k_n_per_m")) & np.all(np.isfinite(q_all), axis=1))
+        if not len(modal):
+            return out
+        flange = np.where(np.isfinite(m.column("device")), m.column("device"), 0.0)[modal] * flange_kg
         scale = tuple(float(v) for v in scale)
-        for i in np.flatnonzero(modal):
-            q = tuple(np.round(q_all[i], 12))
-            key = (str(m.direction[i]), int(m.mode[i]))
-            nominal, changed = table(q, (1.0,) * 6, 0.0, 0.0, 0.0), table(q, scale, float(flange[i]), softening, tip_kg)
-            if key in nominal and key in changed:
-                column = 0 if m.quantity[i] == "fn_hz" else 2
-                with np.errstate(all="ignore"):
-                    value = changed[key][column] / nominal[key][column]
-                out[i] = value if math.isfinite(value) else 1.0
+        column = np.where(m.quantity[modal] == "fn_hz", 0, 2)
+        groups, inverse = np.unique(np.column_stack([np.round(q_all[modal], 12), flange]), axis=0, return_inverse=True)
+        order = np.argsort(inverse.reshape(-1), kind="stable")
+        bounds = np.searchsorted(inverse.reshape(-1)[order], np.arange(len(groups) + 1))
+        keys = list(zip(m.direction[modal].astype(str).tolist(), m.mode[modal].astype(int).tolist()))
+        with np.errstate(all="ignore"):
+            for g, group in enumerate(groups):
+                q = tuple(group[:6])
+                nominal, changed = table(q, (1.0,) * 6, 0.0, 0.0, 0.0), table(q, scale, float(group[6]), softening, tip_kg)
+                for k in order[bounds[g] : bounds[g + 1]].tolist():
+                    if keys[k] in nominal and keys[k] in changed:
+                        value = changed[keys[k]][column[k]] / nominal[keys[k]][column[k]]
+                        out[modal[k]] = value if math.isfinite(value) else 1.0
         return out
 
     def combine(y, m, thetas: dict) -> np.ndarray:
