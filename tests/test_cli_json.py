@@ -4,6 +4,8 @@ defaults rule (issue 19): the cut from --cut or the model directory, else a clea
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import math
 import subprocess
@@ -37,6 +39,22 @@ def json_of(*args):
     return strict_json(done.stdout)
 
 
+def json_in_process(*args):
+    """As `json_of`, through the same entry point (`service.cli.main`) in this process: a new
+    interpreter spends 3 s importing scipy, scikit-learn and pinocchio before any command runs."""
+    from service.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            main([*map(str, args), "--json"])
+            code = 0
+        except SystemExit as exc:
+            code = exc.code or 0
+    assert code == 0, err.getvalue()
+    return strict_json(out.getvalue())
+
+
 @pytest.fixture(scope="module")
 def small(tmp_path_factory):
     """Seed 004's positions 1, 4 and 7 (the smallest table `train --cv 3` accepts), a model of
@@ -59,35 +77,35 @@ def test_train_with_one_pose_folds_is_valid_json_and_says_why_r2_is_null(small):
 
 def test_every_command_prints_strict_json_on_small_inputs(small, tmp_path):
     if not (small / "model").exists():
-        json_of("train", small / "three.csv", "--cv", "0", "--cut", CUT, "--out", small / "model")
-    json_of("data", "check", small / "three.csv")
+        json_in_process("train", small / "three.csv", "--cv", "0", "--cut", CUT, "--out", small / "model")
+    json_of("data", "check", small / "three.csv")  # through a new interpreter, as installed; the rest in this process
     (tmp_path / "tables").mkdir()
     (tmp_path / "tables" / "three.csv").write_text((small / "three.csv").read_text())
-    json_of("data", "summary", tmp_path / "tables")
+    json_in_process("data", "summary", tmp_path / "tables")
     f = np.linspace(5.0, 60.0, 400)  # one mode, 20 Hz, zeta 0.03, k 1e6 N/m: the smallest FRF fit accepts
     h = 1.0 / (1e6 * (1 - (f / 20.0) ** 2 + 2j * 0.03 * f / 20.0))
     frf = tmp_path / "frf.csv"
     frf.write_text("# pose_id = P1\n# x_mm = 1500\n# y_mm = 0\n# z_mm = 800\n# beta_deg = 0\nfrequency_hz,h_xx_re,h_xx_im\n" + "".join(f"{float(a)!r},{float(b.real)!r},{float(b.imag)!r}\n" for a, b in zip(f, h)))
-    json_of("fit", frf, "--out", tmp_path / "fitted.csv")
-    json_of("predict", small / "model", "--poses", small / "pose.csv")
-    json_of("absorber", "field", "--target-hz", "20")
-    json_of("absorber", "robust", "--host", DATA / "seeds/dogan2024_host_milling.toml", "--rpm-min", "2700", "--rpm-max", "2700", "--rpm-steps", "1", "--samples", "50")
-    json_of("absorber", "tune", "--host-fn-hz", "20", "--host-k-n-per-m", "5e5", "--host-zeta", "0.03", "--mass-ratio", "0.05", "--layout", "tmd", *CUT_FLAGS)
-    entries = json_of("schedule", small / "model", "--poses", small / "pose.csv")  # the model's cut
+    json_in_process("fit", frf, "--out", tmp_path / "fitted.csv")
+    json_in_process("predict", small / "model", "--poses", small / "pose.csv")
+    json_in_process("absorber", "field", "--target-hz", "20")
+    json_in_process("absorber", "robust", "--host", DATA / "seeds/dogan2024_host_milling.toml", "--rpm-min", "2700", "--rpm-max", "2700", "--rpm-steps", "1", "--samples", "50")
+    json_in_process("absorber", "tune", "--host-fn-hz", "20", "--host-k-n-per-m", "5e5", "--host-zeta", "0.03", "--mass-ratio", "0.05", "--layout", "tmd", *CUT_FLAGS)
+    entries = json_in_process("schedule", small / "model", "--poses", small / "pose.csv")  # the model's cut
     assert entries[0]["stability"]["converged"] is True
-    json_of("control", "schedule", "--modes", small / "three.csv", "--poses", small / "pose.csv")
-    json_of("chatter", "--modes", small / "three.csv", "--pose-id", "P4", "--rpm", "2000", *CUT_FLAGS)
-    json_of("lobes", "--modes", small / "three.csv", "--pose-id", "P4", "--rpm-min", "1900", "--rpm-max", "2100", "--rpm-steps", "2", *CUT_FLAGS)
-    json_of("sle", "--modes", small / "three.csv", "--pose-id", "P4", "--direction", "y", "--rpm", "2000", "--teeth", "3", "--kt-mpa", "796", "--kn-mpa", "169",
+    json_in_process("control", "schedule", "--modes", small / "three.csv", "--poses", small / "pose.csv")
+    json_in_process("chatter", "--modes", small / "three.csv", "--pose-id", "P4", "--rpm", "2000", *CUT_FLAGS)
+    json_in_process("lobes", "--modes", small / "three.csv", "--pose-id", "P4", "--rpm-min", "1900", "--rpm-max", "2100", "--rpm-steps", "2", *CUT_FLAGS)
+    json_in_process("sle", "--modes", small / "three.csv", "--pose-id", "P4", "--direction", "y", "--rpm", "2000", "--teeth", "3", "--kt-mpa", "796", "--kn-mpa", "169",
             "--tool-diameter-mm", "6", "--helix-deg", "30", "--radial-depth-mm", "3", "--axial-depth-mm", "0.2", "--feed-per-tooth-mm", "0.05", "--milling", "down")
-    json_of("twin", "modes", "--x-mm", "1600", "--y-mm", "0", "--z-mm", "600", "--beta-deg", "0")
+    json_in_process("twin", "modes", "--x-mm", "1600", "--y-mm", "0", "--z-mm", "600", "--beta-deg", "0")
     grid = tmp_path / "grid.toml"
     grid.write_text('[meta]\nkind = "pose_grid"\nsource = "test"\n\n[[poses]]\nx_mm = 1600\ny_mm = 0\nz_mm = 600\nbeta_deg = 0\n')
-    json_of("twin", "campaign", "--grid", grid, "--out", tmp_path / "campaign.csv")
-    json_of("sweep", "--twin", DATA / "robots/kr_r2700_twin.toml", "--grid", grid, "--cut", DATA / "cuts/sweep_demo_cut.toml", "--out", tmp_path / "sweep", "--workers", "1", "--no-lobes")
+    json_in_process("twin", "campaign", "--grid", grid, "--out", tmp_path / "campaign.csv")
+    json_in_process("sweep", "--twin", DATA / "robots/kr_r2700_twin.toml", "--grid", grid, "--cut", DATA / "cuts/sweep_demo_cut.toml", "--out", tmp_path / "sweep", "--workers", "1", "--no-lobes")
     made = run("gap-campaign", "--cut", CUT, "--out", tmp_path / "meas.csv", "--poses", "2")
     assert made.returncode == 0, made.stderr
-    json_of("gap", "--measured", tmp_path / "meas.csv", "--twin", "--cut", CUT, "--out", tmp_path / "gap")
+    json_in_process("gap", "--measured", tmp_path / "meas.csv", "--twin", "--cut", CUT, "--out", tmp_path / "gap")
 
 
 def test_a_command_without_a_cut_names_both_ways_to_give_one(small, tmp_path):
