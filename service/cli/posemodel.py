@@ -66,7 +66,7 @@ def train(
             if t in model.targets_
         }
     if model.physics_ is not None:
-        report["physics"] = {k: v for k, v in model.physics_.items() if k in ("used", "reason", "stiffness_scales")}
+        report["physics"] = {k: v for k, v in model.physics_.items() if k in ("used", "reason", "stiffness_scales", "fit_converged")}
     if as_json:
         print_json(report)
         return
