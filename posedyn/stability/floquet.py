@@ -1337,7 +1337,7 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
     for j, (s, e) in enumerate(jobs):  # the count at half the answer's resolution where it needed a fine cut model
         p = points[j]
         if p is not None and (verify or hinted[j]) and np.isfinite(p.depth_m) and p.substeps_per_rad >= FINE_CHECK and p.substeps_per_rad / 2.0 > base:
-            level = int(round(np.log2(p.substeps_per_rad / 2.0 / base)))
+            level = _level(p.substeps_per_rad / 2.0, base)
             count, resolved, _ = unstable_count(char(s, level, True), VERIFY_FRACTION * p.depth_m, tau_all[e], extra=[b[2] for b in p.branches])
             if not (count == 0 and resolved):
                 points[j] = _solve([dyns[s]], cut, rpm[[e]], rel_tol, p.substeps_per_rad / 2.0, True, True, branch_families, frequencies=frequencies)[0][0]
@@ -1351,7 +1351,7 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
             scan.setdefault(s, []).append(j)
     for s, group in scan.items():
         group = np.array(group)
-        levels = np.array([int(round(np.log2(points[j].substeps_per_rad / base))) for j in group])
+        levels = np.array([_level(points[j].substeps_per_rad, base) for j in group])
         hit, near = flip_islands(char(s, 0, True), [points[j].depth_m for j in group], tau_all[[jobs[j][1] for j in group]], refine=False)
         hit &= levels == 0
         for level in np.unique(levels[(hit | near) & (levels > 0)]):
@@ -1373,6 +1373,11 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
     for j, (s, e) in enumerate(jobs):
         results[s][0 if pairs else e] = points[j]
     return results
+
+
+def _level(substeps_per_rad: float, base: float) -> int:
+    """The refinement level of a resolution: substeps_per_rad = base x 2^level."""
+    return int(round(np.log2(substeps_per_rad / base)))
 
 
 def _batched_step(char, keeps, level, a, t, tau, owner, Gc, vec, full=False):
