@@ -117,7 +117,7 @@ import numpy as np
 
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.errors import InputError
-from posedyn.stability import sdm
+from posedyn.stability import hill, sdm
 from posedyn.stability.cutting import Cut, engaged_integral, mean_force_matrix
 
 #: Sub-steps per radian of tool angle in a cutting segment, coarsest level.
@@ -1618,14 +1618,42 @@ def _step_level(char, level, a_prev, t_prev, tau, Gc, vec):
 
 
 def _repair(char, tau, a_top):
-    """A boundary point below a_top missed by the seeds: first `_descend` (Newton from the
-    multipliers nearest the boundary condition at VERIFY_FRACTION x a_top), else bisection in
-    depth on the winding count, then Newton from the multipliers nearest it there."""
-    if np.isfinite(a_top):
+    """A boundary point below a_top missed by the seeds: first Newton from the boundary points of
+    Hill's method (`_from_hill`), then `_descend` (Newton from the multipliers nearest the
+    boundary condition at VERIFY_FRACTION x a_top), else bisection in depth on the winding
+    count, then Newton from the multipliers nearest it there."""
+    found = _from_hill(char, tau, a_top)
+    if found is None and np.isfinite(a_top):
         found = _descend(char, tau, a_top)
-        if found is not None:
-            return found
-    return _bisect_repair(char, tau, a_top)
+    return found if found is not None else _bisect_repair(char, tau, a_top)
+
+
+#: Repair from Hill's method: Newton from this many of its lowest boundary points below the
+#: depth the count rejected (and up to HILL_ABOVE x it: Newton moves a seed by a few per cent).
+HILL_STARTS = 4
+HILL_ABOVE = 1.1
+
+
+def _from_hill(char, tau, a_top):
+    """The zeroth-order seeds miss boundary points that the interrupted cut makes between modes
+    at or below a few tooth-passing frequencies (`hill`); Hill's method with HARMONICS harmonics
+    places them within a few per cent. Newton (whole structure) from its lowest HILL_STARTS
+    points; the lowest one reached below VERIFY_FRACTION x a_top is accepted when the winding
+    count at VERIFY_FRACTION x its depth is 0. None otherwise (or where the structure has no
+    mode within reach of the harmonics)."""
+    a_s, th_s = hill.hill_seeds(char.frf, char.free_eig()[0], char.cut, tau)
+    take = np.flatnonzero(a_s <= HILL_ABOVE * a_top)[:HILL_STARTS]
+    if not len(take):
+        return None
+    a_r, t_r, ok, _, _ = _newton(char, a_s[take], th_s[take], np.full(len(take), tau))
+    ok &= (a_r > 0) & (a_r < VERIFY_FRACTION * a_top)
+    if not ok.any():
+        return None
+    k = np.flatnonzero(ok)[np.argmin(a_r[ok])]
+    theta = float(np.mod(t_r[k], 2.0 * np.pi))
+    best = (float(a_r[k]), min(theta, 2.0 * np.pi - theta))
+    count, resolved, _ = unstable_count(char, VERIFY_FRACTION * best[0], tau, extra=[best[1]])
+    return best if count == 0 and resolved else None
 
 
 #: Repair by descent: theta samples of the multipliers, Newton starts, rounds.
