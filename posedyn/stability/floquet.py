@@ -1660,6 +1660,8 @@ def _from_hill(char, tau, a_top):
 DESCENT_POINTS = 64
 DESCENT_STARTS = 4
 DESCENT_ROUNDS = 4
+#: Depths (fractions of the rejected one) counted before the bisection proper, in this order.
+BISECT_PROBES = (0.95, 0.8, 0.5)
 #: Thetas sampled for the Newton starts after the bisection.
 BISECT_POINTS = 181
 #: How far above the bisection's bracket a Newton root may lie and still be taken (half the
@@ -1723,10 +1725,17 @@ def _bisect_repair(char, tau, a_top):
             lo, a = a, a * 2.0
         if hi is None:
             return None
-    lo = max(lo, hi * 1e-3)
-    if unstable_count(char, lo, tau)[0] > 0:
-        lo = 0.0
+    floor = max(lo, hi * 1e-3)
     hi *= VERIFY_FRACTION
+    lo = None
+    for fraction in BISECT_PROBES:  # a missed branch is often just below (a finer cut model's)
+        if unstable_count(char, fraction * hi, tau)[0] > 0:
+            hi = fraction * hi
+        else:
+            lo = fraction * hi
+            break
+    if lo is None:
+        lo = 0.0 if unstable_count(char, floor, tau)[0] > 0 else floor
     while hi - lo > 0.01 * hi:
         mid = 0.5 * (lo + hi) if lo == 0.0 else np.sqrt(lo * hi)
         if unstable_count(char, mid, tau)[0] > 0:
