@@ -32,7 +32,7 @@ import numpy as np
 from posedyn.errors import InputError
 from posedyn.gap.analysis import CandidateEffect, Measurements, Parameter
 from posedyn.robot import Robot, ToolPose, TwinParameters, direction_rows
-from posedyn.robot.twin import twin_modes
+from posedyn.robot.twin import modes_at, pose_inertia, twin_modes
 
 MODEL_JOINT_COLUMNS = tuple(f"model_q{j}_rad" for j in range(1, 7))
 #: The candidates that act through the twin.
@@ -86,6 +86,8 @@ def twin_candidates(robot: Robot, params: TwinParameters) -> dict[str, Candidate
     selected on the fn rows first) and `flange_device` (a device's mass on the flange where
     `device` = 1, at the twin's flange offset, kg 0-200)."""
     cache: dict = {}
+    inertia: dict = {}  # pose_inertia per (q, flange mass, tip mass): a stiffness fit changes neither
+    data = robot.model.createData()
 
     def table(q: tuple, scale: tuple, flange_kg: float, softening: float, tip_kg: float) -> dict:
         key = (q, scale, round(flange_kg, 12), round(softening, 14), round(tip_kg, 12))
@@ -94,7 +96,12 @@ def twin_candidates(robot: Robot, params: TwinParameters) -> dict[str, Candidate
             if flange_kg or softening or tip_kg:
                 p = replace(p, flange_mass_kg=p.flange_mass_kg + flange_kg, gravity_softening_per_knm=p.gravity_softening_per_knm + softening,
                             tip_mass_kg=p.tip_mass_kg + tip_kg)
-            modes = twin_modes(robot, np.asarray(q), p)
+            masses = (q, key[2], key[4])
+            if masses not in inertia:
+                if len(inertia) > 20000:
+                    inertia.clear()
+                inertia[masses] = pose_inertia(robot, np.asarray(q), p, data)
+            modes = modes_at(inertia[masses], p)
             if len(cache) > 20000:
                 cache.clear()
             cache[key] = {(d, j): row for d in ("x", "y", "z") for j, row in enumerate(direction_rows(modes, d, params.robot_modes_per_direction), 1)}

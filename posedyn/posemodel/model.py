@@ -36,6 +36,7 @@ from posedyn.errors import InputError, check_choice
 from posedyn.io import format_modal_table
 from posedyn.posemodel._gp import Predictor, fit_gps
 from posedyn.robot import direction_rows, tool_pose, twin_modes
+from posedyn.robot.twin import modes_at, pose_inertia
 from posedyn.table import DIRECTIONS, JOINT_COLUMNS, MODAL_PARAMS, ModalTable, PoseSet
 from posedyn.uncertainty import ModalDistribution
 
@@ -163,12 +164,14 @@ def pose_joints(robot, poses: PoseSet) -> np.ndarray:
     return np.array([robot.inverse(tool_pose(poses, i), data) for i in range(len(poses))])
 
 
-def _twin_log_values(robot, params, q: np.ndarray, targets: list[str], robot_modes: int) -> np.ndarray:
+def _twin_log_values(robot, params, q: np.ndarray, targets: list[str], robot_modes: int, inertias=None) -> np.ndarray:
+    """`inertias`: the `pose_inertia` of every q with these params' masses (a fit of the joint
+    stiffnesses computes them once)."""
     data = robot.model.createData()
     out = np.full((len(q), len(targets)), np.nan)
     parsed = [parse_target(t) for t in targets]
     for i, qi in enumerate(q):
-        modes = twin_modes(robot, qi, params, data)
+        modes = modes_at(inertias[i], params) if inertias is not None else twin_modes(robot, qi, params, data)
         rows = {d: direction_rows(modes, d, robot_modes) for d in DIRECTIONS}
         for j, (d, m, param) in enumerate(parsed):
             if m <= len(rows[d]) and param in PARAMS:
@@ -246,9 +249,11 @@ class PoseModel:
         except InputError as exc:
             return np.zeros_like(logY), {"used": False, "reason": str(exc)}
         fit_cols = [j for j, t in enumerate(self.targets_) if parse_target(t)[2] in ("fn_hz", "k_n_per_m")]
+        data = robot.model.createData()
+        inertias = [pose_inertia(robot, qi, params, data) for qi in q]  # the scales change the stiffnesses only
 
         def residual(log_scale):
-            twin = _twin_log_values(robot, params.scaled(np.exp(log_scale)), q, [self.targets_[j] for j in fit_cols], count)
+            twin = _twin_log_values(robot, params.scaled(np.exp(log_scale)), q, [self.targets_[j] for j in fit_cols], count, inertias)
             r = logY[:, fit_cols] - twin
             return np.nan_to_num(r[:, np.isfinite(twin).all(axis=0)]).ravel()
 
@@ -262,7 +267,7 @@ class PoseModel:
                                               loss="soft_l1", f_scale=0.1)
         scales = np.exp(result.x)
         prior_model = PhysicsPrior(robot, params, scales, count)
-        prior = _twin_log_values(robot, params.scaled(scales), q, self.targets_, count)
+        prior = _twin_log_values(robot, params.scaled(scales), q, self.targets_, count, inertias)
         has = np.isfinite(prior).all(axis=0) & ~self.cross_
         prior[:, ~has] = 0.0
         self.prior_targets_ = has

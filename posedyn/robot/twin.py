@@ -132,30 +132,52 @@ def normal_modes(M: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return scipy.linalg.eigh(K, M)
 
 
-def joint_stiffness(robot: Robot, q: np.ndarray, params: TwinParameters, data: pin.Data) -> np.ndarray:
-    """Joint stiffnesses (N m / rad) at q: k_j / (1 + c |tau_g,j(q)| / 1000 N m), tau_g the
-    gravity torques of the robot's links and spindle (pinocchio's generalized gravity; a flange
+def joint_stiffness(params: TwinParameters, gravity_nm: np.ndarray) -> np.ndarray:
+    """Joint stiffnesses (N m / rad) at a pose: k_j / (1 + c |tau_g,j(q)| / 1000 N m), tau_g the
+    gravity torques of the robot's links and spindle at q (`PoseInertia.gravity_nm`; a flange
     device's own weight is left out). c = 0: the constant k_j."""
     k = np.asarray(params.joint_stiffness_nm_per_rad, dtype=float)
     if params.gravity_softening_per_knm == 0.0:
         return k
-    tau = pin.computeGeneralizedGravity(robot.model, data, q)
-    return k / np.maximum(1.0 + params.gravity_softening_per_knm * np.abs(tau) / 1000.0, 0.05)
+    return k / np.maximum(1.0 + params.gravity_softening_per_knm * np.abs(gravity_nm) / 1000.0, 0.05)
+
+
+@dataclass(frozen=True, eq=False)
+class PoseInertia:
+    """What the modes at joint angles q need besides the joint stiffnesses: the mass matrix with
+    the flange and tool-tip point masses (`mass_matrix`), the tool-tip linear Jacobian (3 x 6) and
+    the gravity torques (N m, pinocchio's generalized gravity). A fit that changes only the
+    stiffnesses (`scaled`, the softening) computes it once per pose."""
+
+    mass: np.ndarray
+    jacobian: np.ndarray
+    gravity_nm: np.ndarray
+
+
+def pose_inertia(robot: Robot, q: np.ndarray, params: TwinParameters, data: pin.Data | None = None) -> PoseInertia:
+    """`PoseInertia` at q (rad) with the flange and tip masses of `params`."""
+    data = data or robot.model.createData()
+    q = np.asarray(q, dtype=float)
+    M = mass_matrix(robot, q, params, data)
+    gravity = np.array(pin.computeGeneralizedGravity(robot.model, data, q))
+    return PoseInertia(M, robot.jacobian(q, data)[:3], gravity)
+
+
+def modes_at(inertia: PoseInertia, params: TwinParameters) -> TwinModes:
+    """Modes of the robot from its inertia at a pose and the joint stiffnesses of `params`:
+    K phi = w^2 M phi, K = diag(joint stiffness), tool-tip shapes J phi."""
+    w2, phi = normal_modes(inertia.mass, np.diag(joint_stiffness(params, inertia.gravity_nm)))
+    return TwinModes(
+        fn_hz=np.sqrt(w2) / (2 * np.pi),
+        zeta=np.full(6, params.zeta),
+        tip_shapes=inertia.jacobian @ phi,
+        spindle_modes=_tip_loaded(params.spindle_modes, params.tip_mass_kg),
+    )
 
 
 def twin_modes(robot: Robot, q: np.ndarray, params: TwinParameters, data: pin.Data | None = None) -> TwinModes:
     """Modes of the robot at joint angles q (rad)."""
-    data = data or robot.model.createData()
-    q = np.asarray(q, dtype=float)
-    M = mass_matrix(robot, q, params, data)
-    w2, phi = normal_modes(M, np.diag(joint_stiffness(robot, q, params, data)))
-    J = robot.jacobian(q, data)[:3]
-    return TwinModes(
-        fn_hz=np.sqrt(w2) / (2 * np.pi),
-        zeta=np.full(6, params.zeta),
-        tip_shapes=J @ phi,
-        spindle_modes=_tip_loaded(params.spindle_modes, params.tip_mass_kg),
-    )
+    return modes_at(pose_inertia(robot, q, params, data), params)
 
 
 def _tip_loaded(spindle_modes: dict, tip_mass_kg: float) -> dict:
