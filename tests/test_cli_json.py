@@ -4,9 +4,6 @@ defaults rule (issue 19): the cut from --cut or the model directory, else a clea
 
 from __future__ import annotations
 
-import contextlib
-import io
-import json
 import math
 import subprocess
 import sys
@@ -14,19 +11,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tests.cli_helpers import json_in_process, strict_json
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "datasets"
 SEED004 = DATA / "seeds/hou2023_positions.csv"
 CUT = DATA / "seeds/hou2023_cut.toml"
 CUT_FLAGS = ["--teeth", "3", "--kt-mpa", "796", "--kn-mpa", "169", "--radial-immersion", "0.5"]
-
-
-def strict_json(text: str):
-    def refuse(constant):
-        raise ValueError(f"{constant} is not JSON")
-
-    return json.loads(text, parse_constant=refuse)
 
 
 def run(*args):
@@ -37,22 +28,6 @@ def json_of(*args):
     done = run(*args, "--json")
     assert done.returncode == 0, done.stderr
     return strict_json(done.stdout)
-
-
-def json_in_process(*args):
-    """As `json_of`, through the same entry point (`service.cli.main`) in this process: a new
-    interpreter spends 3 s importing scipy, scikit-learn and pinocchio before any command runs."""
-    from service.cli import main
-
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            main([*map(str, args), "--json"])
-            code = 0
-        except SystemExit as exc:
-            code = exc.code or 0
-    assert code == 0, err.getvalue()
-    return strict_json(out.getvalue())
 
 
 @pytest.fixture(scope="module")

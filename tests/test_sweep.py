@@ -27,6 +27,7 @@ from posedyn.io.twin_file import load_twin
 from posedyn.robot import ToolPose
 from posedyn.stability import Discretization, StabilityModel
 from posedyn.stability.batch import BatchStability
+from tests.cli_helpers import cli_in_process, json_in_process
 
 ROOT = Path(__file__).resolve().parents[1]
 TWIN = ROOT / "datasets/robots/kr_r2700_twin.toml"
@@ -199,9 +200,7 @@ def test_sweep_with_a_trained_model_reports_uncertainty_and_equals_posedyn_sched
 
     picked = reachable[:2]
     (tmp_path / "poses.csv").write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\n" + "".join(f"{r['pose_id']},{r['x_mm']},{r['y_mm']},{r['z_mm']},{r['beta_deg']}\n" for r in picked))
-    done = subprocess.run([sys.executable, "-m", "service", "schedule", tmp_path / "model", "--poses", tmp_path / "poses.csv", "--cut", CUT, "--json"], capture_output=True, text=True, cwd=ROOT)
-    assert done.returncode == 0, done.stderr
-    for row, entry in zip(picked, json.loads(done.stdout)):
+    for row, entry in zip(picked, json_in_process("schedule", tmp_path / "model", "--poses", tmp_path / "poses.csv", "--cut", CUT)):
         assert entry["pose_id"] == row["pose_id"]
         assert float(row["critical_depth_mm"]) == pytest.approx(entry["critical_depth_mm"], rel=1e-9)
         assert float(row["dominant_chatter_hz"]) == pytest.approx(entry["dominant_chatter_hz"], rel=1e-9)
@@ -209,17 +208,12 @@ def test_sweep_with_a_trained_model_reports_uncertainty_and_equals_posedyn_sched
         assert float(row["critical_depth_with_absorber_mm"]) == pytest.approx(entry["critical_depth_with_absorber_mm"], rel=1e-9)
         assert float(row["dvf_gain_ns_per_m"]) == pytest.approx(entry["controller"]["dvf_gain_ns_per_m"], rel=1e-9)
         assert entry["stability"]["method"] == "floquet" and entry["stability"]["converged"]
-    predicted = subprocess.run([sys.executable, "-m", "service", "predict", tmp_path / "model", "--poses", tmp_path / "poses.csv", "--out", tmp_path / "modes.csv"], capture_output=True, text=True, cwd=ROOT)
-    assert predicted.returncode == 0, predicted.stderr
+    code, _, err = cli_in_process("predict", tmp_path / "model", "--poses", tmp_path / "poses.csv", "--out", tmp_path / "modes.csv")
+    assert code == 0, err
     cut, rpm, _ = read_cut(CUT)
     for row in picked:
-        chatter = subprocess.run(
-            [sys.executable, "-m", "service", "chatter", "--modes", tmp_path / "modes.csv", "--pose-id", row["pose_id"], "--rpm", str(rpm), "--teeth", str(cut.teeth),
-             "--kt-mpa", str(cut.kt_pa / 1e6), "--kn-mpa", str(cut.kn_pa / 1e6), "--radial-immersion", str(cut.radial_immersion), "--milling", cut.milling, "--json"],
-            capture_output=True, text=True, cwd=ROOT,
-        )
-        assert chatter.returncode == 0, chatter.stderr
-        single = json.loads(chatter.stdout)
+        single = json_in_process("chatter", "--modes", tmp_path / "modes.csv", "--pose-id", row["pose_id"], "--rpm", rpm, "--teeth", cut.teeth,
+                                 "--kt-mpa", cut.kt_pa / 1e6, "--kn-mpa", cut.kn_pa / 1e6, "--radial-immersion", cut.radial_immersion, "--milling", cut.milling)
         assert single["critical_depth_mm"] == pytest.approx(float(row["critical_depth_mm"]), rel=5e-3)
         assert single["dominant_chatter_hz"] == pytest.approx(float(row["dominant_chatter_hz"]), rel=5e-3)
 
