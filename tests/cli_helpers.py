@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import subprocess
 
 
 def strict_json(text: str):
@@ -37,3 +38,11 @@ def json_in_process(*args):
     code, out, err = cli_in_process(*args, "--json")
     assert code == 0, err
     return strict_json(out)
+
+
+def run_cli(*args, cwd=None) -> subprocess.CompletedProcess:
+    """`posedyn ARGS` in this process (`cli_in_process`, from `cwd` if given) as a
+    CompletedProcess: returncode, stdout, stderr as text."""
+    with contextlib.chdir(cwd) if cwd else contextlib.nullcontext():
+        code, out, err = cli_in_process(*args)
+    return subprocess.CompletedProcess(["posedyn", *map(str, args)], code, out, err)

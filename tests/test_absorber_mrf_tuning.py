@@ -2,8 +2,6 @@
 
 import json
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -17,6 +15,7 @@ from posedyn.errors import InputError
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.stability import Cut, mean_force_matrix
 from posedyn.table import Mode
+from tests.cli_helpers import run_cli
 
 
 def test_seed004_absorber_matches_its_design(datasets):
@@ -156,8 +155,8 @@ def test_monte_carlo_without_spread_is_the_nominal_limit_and_the_cli_prints_it(d
     floor = 2 * host.k_n_per_m * host.zeta * (1 + host.zeta) / h
     assert floor == pytest.approx(1.2128e-3, rel=1e-3)
     assert np.all(stats.mean_m >= floor * (1 - 1e-4)) and np.all(stats.mean_m < 1.1 * floor)
-    out = subprocess.run([sys.executable, "-c", "from service.cli import main; main()", "absorber", "robust", "--host", str(datasets / "seeds/dogan2024_host_milling.toml"),
-                          "--layout", "tmd", "--rpm-min", "2700", "--rpm-max", "2700", "--rpm-steps", "1", "--json"], capture_output=True, text=True, timeout=300)
+    out = run_cli("absorber", "robust", "--host", str(datasets / "seeds/dogan2024_host_milling.toml"),
+                  "--layout", "tmd", "--rpm-min", "2700", "--rpm-max", "2700", "--rpm-steps", "1", "--json")
     assert out.returncode == 0, out.stderr
     row = json.loads(out.stdout)[0]
     assert set(row) == {"rpm", "mean_mm", "std_mm", "cv_pct", "p95_lower_mm", "q05_mm", "nominal_mm", "actuator_force_p95_n", "actuator_force_ratio", "actuator_saturates", "method", "zoa_deviation_pct"}
@@ -195,8 +194,8 @@ def test_robust_tuning_raises_the_guaranteed_depth_where_the_host_is_uncertain(d
     text = (datasets / "seeds/dogan2024_host_milling.toml").read_text().replace("fn_rel_std = 0.01", "fn_rel_std = 0.05")
     host_file = tmp_path / "host.toml"
     host_file.write_text(text)
-    out = subprocess.run([sys.executable, "-c", "from service.cli import main; main()", "absorber", "robust", "--host", str(host_file), "--layout", "tmd",
-                          "--rpm-min", "2600", "--rpm-max", "3000", "--rpm-steps", "3", "--robust-tuning", "--seed", "7", "--json"], capture_output=True, text=True, timeout=600)
+    out = run_cli("absorber", "robust", "--host", str(host_file), "--layout", "tmd",
+                  "--rpm-min", "2600", "--rpm-max", "3000", "--rpm-steps", "3", "--robust-tuning", "--seed", "7", "--json")
     assert out.returncode == 0, out.stderr
     doc = json.loads(out.stdout)
     nominal, robust = doc["nominal"], doc["robust"]

@@ -3,8 +3,6 @@ position 5; the absorber and schedule CLIs."""
 
 import json
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -20,6 +18,7 @@ from posedyn.io.cut import read_cut
 
 from posedyn.stability.timesim import simulate
 from posedyn.table import Mode
+from tests.cli_helpers import run_cli
 
 
 def test_coupled_structure_reproduces_the_tmd_receptance():
@@ -68,7 +67,7 @@ def test_position5_absorber_suppresses_chatter_in_the_time_domain(position5, cap
 
 
 def posedyn(*args):
-    return subprocess.run([sys.executable, "-m", "service", *map(str, args)], capture_output=True, text=True)
+    return run_cli(*args)
 
 
 def test_absorber_cli_contracts():

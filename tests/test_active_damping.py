@@ -2,14 +2,13 @@
 
 import json
 import math
-import subprocess
-import sys
 
 import pytest
 
 from absorber.active_damping import DVF, Actuator, ControlConfig, actuator_angle_to_gravity, gain_schedule, residue_frf
 from posedyn.io import read_modal_table, read_params
 from posedyn.robot import rotation_from_beta
+from tests.cli_helpers import run_cli
 
 
 @pytest.fixture(scope="module")
@@ -89,11 +88,8 @@ def test_schedule_respects_the_force_limit_on_every_pose_of_the_campaign(dataset
 def test_control_schedule_cli(datasets, tmp_path):
     poses = tmp_path / "p.csv"
     poses.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nP5,1400,0,800,0\n")
-    result = subprocess.run(
-        [sys.executable, "-m", "service", "control", "schedule", "--modes", datasets / "seeds/hou2023_positions.csv", "--poses", poses,
-         "--actuator", datasets / "seeds/sahu2024_active_damping.toml", "--json"],
-        capture_output=True, text=True,
-    )
+    result = run_cli("control", "schedule", "--modes", datasets / "seeds/hou2023_positions.csv", "--poses", poses,
+                     "--actuator", datasets / "seeds/sahu2024_active_damping.toml", "--json")
     assert result.returncode == 0, result.stderr
     entry = json.loads(result.stdout)[0]
     assert {"pose_id", "actuator_fn_hz", "dvf_gain_ns_per_m", "gain_margin_db", "dynamic_stiffness_gain_pct", "max_force_n", "virtual_absorber"} <= set(entry)

@@ -1,12 +1,11 @@
 """`posedyn data check` and `posedyn data summary`, run as a user would (a subprocess)."""
 
 import json
-import subprocess
-import sys
+from tests.cli_helpers import run_cli
 
 
 def posedyn(*args):
-    return subprocess.run([sys.executable, "-m", "service", *map(str, args)], capture_output=True, text=True)
+    return run_cli(*args)
 
 
 def test_data_check_json_on_a_valid_file(datasets):

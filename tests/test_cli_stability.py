@@ -1,16 +1,15 @@
 """`posedyn chatter` and `posedyn lobes`: the JSON contract and errors."""
 
 import json
-import subprocess
-import sys
 
 import pytest
+from tests.cli_helpers import run_cli
 
 CUT = ["--teeth", "3", "--kt-mpa", "796", "--kn-mpa", "169", "--radial-immersion", "0.5", "--milling", "down"]
 
 
 def posedyn(*args):
-    return subprocess.run([sys.executable, "-m", "service", *map(str, args)], capture_output=True, text=True)
+    return run_cli(*args)
 
 
 def test_chatter_json_contract(datasets):

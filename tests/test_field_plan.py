@@ -8,6 +8,7 @@ from absorber.coil import Coil
 from absorber.coil_dynamics import CoilDrive, inductance_h
 from absorber.field_plan import FieldPlanner, simulate, step_schedule
 from absorber.mrf import MRFAbsorber
+from tests.cli_helpers import run_cli
 
 ABSORBER, COIL, DRIVE = MRFAbsorber(), Coil(), CoilDrive()
 # three poses of seed 004's workspace, 1.5 s each, the per-pose targets the chain gives there
@@ -99,16 +100,14 @@ def test_plan_cli_on_a_path_across_seed_004s_positions(tmp_path, model_dir, data
     minimum critical depth along the path is higher with the plan. The trajectory file has a row
     per point. A path whose time goes back is refused naming the file, row and column."""
     import json
-    import subprocess
-    import sys
 
     lines = ["pose_id,x_mm,y_mm,z_mm,beta_deg,time_s"]
     for k, t in enumerate(np.arange(0.0, 4.5 + 1e-9, 0.1)):
         lines.append(f"p{k},{1600 if t < 1.5 else 1400 if t < 3.0 else 1200},0,800,0,{t:.2f}")
     path = tmp_path / "path.csv"
     path.write_text("\n".join(lines) + "\n")
-    done = subprocess.run([sys.executable, "-m", "service", "plan", str(model_dir), "--path", str(path), "--cut", str(datasets / "seeds/hou2023_cut.toml"),
-                           "--policy", "depth", "--out", str(tmp_path / "out"), "--json"], capture_output=True, text=True)
+    done = run_cli("plan", str(model_dir), "--path", str(path), "--cut", str(datasets / "seeds/hou2023_cut.toml"),
+                   "--policy", "depth", "--out", str(tmp_path / "out"), "--json")
     assert done.returncode == 0, done.stderr
     summary = json.loads(done.stdout)
     assert summary["solver"]["status"] == "solved" and summary["points"] == 46
@@ -119,8 +118,7 @@ def test_plan_cli_on_a_path_across_seed_004s_positions(tmp_path, model_dir, data
     assert depth["plan"] > 1.2 * depth["step_schedule"]
     assert len((tmp_path / "out/trajectory.csv").read_text().splitlines()) == 47 and (tmp_path / "out/trajectory.png").stat().st_size > 0
     path.write_text("\n".join(lines[:5] + [lines[5].rsplit(",", 1)[0] + ",0.05"] + lines[6:]) + "\n")
-    bad = subprocess.run([sys.executable, "-m", "service", "plan", str(model_dir), "--path", str(path), "--cut", str(datasets / "seeds/hou2023_cut.toml"),
-                          "--out", str(tmp_path / "out2")], capture_output=True, text=True)
+    bad = run_cli("plan", str(model_dir), "--path", str(path), "--cut", str(datasets / "seeds/hou2023_cut.toml"), "--out", str(tmp_path / "out2"))
     assert bad.returncode == 2 and "path.csv" in bad.stderr and "row 5" in bad.stderr and "time_s" in bad.stderr
 
 
@@ -132,20 +130,18 @@ def test_plan_cli_with_the_twins_modes_across_the_seed_003_workspace(tmp_path, d
     the plan does neither, and the least critical depth along the path is higher with it (1.84
     vs 1.15 mm). Two mode sources at once are refused."""
     import json
-    import subprocess
-    import sys
 
     lines = ["pose_id,x_mm,y_mm,z_mm,beta_deg,time_s"] + [f"p{k},{1300 if k < 4 else 1500},-100,600,-60,{0.5 * k}" for k in range(9)]
     path = tmp_path / "path.csv"
     path.write_text("\n".join(lines) + "\n")
-    args = [sys.executable, "-m", "service", "plan", "--twin", str(datasets / "robots/kr_r2700_twin.toml"), "--path", str(path),
+    args = ["plan", "--twin", str(datasets / "robots/kr_r2700_twin.toml"), "--path", str(path),
             "--cut", str(datasets / "cuts/sweep_demo_cut.toml"), "--policy", "depth", "--out", str(tmp_path / "out"), "--json"]
-    done = subprocess.run(args, capture_output=True, text=True)
+    done = run_cli(*args)
     assert done.returncode == 0, done.stderr
     summary = json.loads(done.stdout)
     assert summary["plan"]["max_voltage_v"] <= 48.0 < summary["step_schedule"]["asked_voltage_v"]
     assert summary["plan"]["max_mistune_pct"] < 0.1 and summary["step_schedule"]["max_mistune_pct"] > 7.0
     depth = summary["min_critical_depth_mm"]
     assert depth["plan"] > 1.3 * depth["step_schedule"]
-    both = subprocess.run(args[:4] + ["--modes", str(path)] + args[4:], capture_output=True, text=True)
+    both = run_cli(*args[:1], "--modes", str(path), *args[1:])
     assert both.returncode == 2 and "one mode source" in both.stderr

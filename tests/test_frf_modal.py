@@ -1,8 +1,6 @@
 """FRF import (CSV, UFF) and modal identification against known modes."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -14,6 +12,7 @@ from posedyn.io.frf import FRFSet, read_frf, read_frf_csv, write_frf_csv, write_
 from posedyn.identify import direct_modal_parameters, matrix_modal_fit
 from posedyn.stability import Cut, Discretization, StabilityModel
 from posedyn.table import Mode
+from tests.cli_helpers import run_cli
 
 TRUE = [(6.5, 0.04, 6e5), (18.0, 0.03, 2.5e6), (34.0, 0.05, 4e6), (700.0, 0.03, 4e7), (2600.0, 0.02, 6e7)]
 
@@ -77,7 +76,7 @@ def test_fit_cli_writes_a_coupled_table_that_the_stability_engine_uses(tmp_path)
     modes, clean, H = coupled_matrix(f, rng)
     frf = FRFSet(f, H, pose_id="C1", pose={"x_mm": 1500.0, "y_mm": 0.0, "z_mm": 600.0, "beta_deg": 10.0})
     write_frf_csv(frf, tmp_path / "c1.csv")
-    result = subprocess.run([sys.executable, "-m", "service", "fit", tmp_path / "c1.csv", "--out", tmp_path / "modes.csv", "--modes", "2", "--plot", tmp_path / "plots", "--json"], capture_output=True, text=True)
+    result = run_cli("fit", tmp_path / "c1.csv", "--out", tmp_path / "modes.csv", "--modes", "2", "--plot", tmp_path / "plots", "--json")
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout)["coupled"] is True
     assert (tmp_path / "plots/C1.png").read_bytes()[:4] == b"\x89PNG"

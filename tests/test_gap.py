@@ -4,8 +4,6 @@ effects, realistic noise and 20 random seeds each."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -14,6 +12,7 @@ import pytest
 
 from posedyn.gap import LIBRARY, analyse
 from service.gap.baseline import Baseline, campaign_design, generate_measurements, hide
+from tests.cli_helpers import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 SEEDS = range(20)
@@ -144,10 +143,9 @@ def test_two_equally_good_explanations_are_reported_with_the_measurement_that_se
 
 def test_gap_cli_contract_and_report(tmp_path):
     meas = tmp_path / "meas.csv"
-    base = [sys.executable, "-c", "from service.cli import main; main()"]
-    made = subprocess.run(base + ["gap-campaign", "--cut", str(ROOT / "datasets/seeds/hou2023_cut.toml"), "--out", str(meas), "--hide", "mrf_temperature_drift:modulus_drop_per_mk=3,reference_c=25", "--seed", "2"], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    made = run_cli("gap-campaign", "--cut", str(ROOT / "datasets/seeds/hou2023_cut.toml"), "--out", str(meas), "--hide", "mrf_temperature_drift:modulus_drop_per_mk=3,reference_c=25", "--seed", "2")
     assert made.returncode == 0, made.stderr
-    out = subprocess.run(base + ["gap", "--measured", str(meas), "--twin", "--cut", str(ROOT / "datasets/seeds/hou2023_cut.toml"), "--out", str(tmp_path / "gap"), "--json"], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    out = run_cli("gap", "--measured", str(meas), "--twin", "--cut", str(ROOT / "datasets/seeds/hou2023_cut.toml"), "--out", str(tmp_path / "gap"), "--json")
     assert out.returncode == 0, out.stderr
     doc = json.loads(out.stdout)
     assert set(doc) >= {"effects", "rmse_before", "rmse_after", "noise_std", "explained"}
@@ -160,7 +158,7 @@ def test_gap_cli_contract_and_report(tmp_path):
 def test_bad_measurement_file_names_row_and_column(tmp_path):
     bad = tmp_path / "bad.csv"
     bad.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg,quantity,direction,mode,value,std\np,1400,0,600,0,fn_hz,x,1,13.2,0.05\np,1400,0,600,0,fn_hz,x,1,abc,0.05\n")
-    out = subprocess.run([sys.executable, "-c", "from service.cli import main; main()", "gap", "--measured", str(bad), "--twin", "--out", str(tmp_path / "o")], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    out = run_cli("gap", "--measured", str(bad), "--twin", "--out", str(tmp_path / "o"))
     assert out.returncode == 2 and "bad.csv" in out.stderr and "row 2" in out.stderr and "value" in out.stderr
 
 

@@ -26,6 +26,7 @@ from posedyn.sle import SleCut, sle_m
 from posedyn.stability import critical_points
 from posedyn.table import Mode
 from service.gap.baseline import Baseline
+from tests.cli_helpers import run_cli
 
 SEEDS = range(20)
 KT_PA, KN_PA, HELIX_DEG = 796e6, 169e6, 30.0  # datasets/cuts/sweep_demo_cut.toml
@@ -202,16 +203,14 @@ def test_gap_writes_the_cut_with_the_named_cutting_and_tool_effects(tmp_path):
     path offset at its feed speed), which `posedyn sweep` adds to its SLE; the coefficients
     untouched. A named cutting-coefficient error scales k_t and k_n instead."""
     import json
-    import subprocess
-    import sys
     from types import SimpleNamespace
 
     from posedyn.io.cut import read_cut, read_sle_cut
     from service.cli.gap import _write_updated_cut
 
     cut_file = ROOT / "datasets/cuts/sweep_demo_cut.toml"
-    done = subprocess.run([sys.executable, "-m", "service", "gap", "--measured", str(ROOT / "datasets/campaigns/sle_walls.csv"), "--twin",
-                           "--cut", str(cut_file), "--out", str(tmp_path / "gap"), "--json"], capture_output=True, text=True, timeout=600)
+    done = run_cli("gap", "--measured", str(ROOT / "datasets/campaigns/sle_walls.csv"), "--twin",
+                           "--cut", str(cut_file), "--out", str(tmp_path / "gap"), "--json")
     assert done.returncode == 0, done.stderr
     doc = json.loads(done.stdout)
     fitted = {e["name"]: next(iter(e["parameters"].values())) for e in doc["effects"]}

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from posedyn.gap import Measurements, analyse, fit_noise
+from tests.cli_helpers import run_cli
 
 SEEDS = range(20)
 FN_STD, K_STD = 0.003, 0.03  # stated relative std of fn and k (an impact test's)
@@ -242,8 +243,6 @@ def test_gap_cli_writes_the_twin_with_the_named_effects(tmp_path):
     (provenance in its comment), whose modes at a pose are those of the nominal twin changed by
     exactly those; the gap on held-out rows shrinks 100-fold."""
     import json
-    import subprocess
-    import sys
     from dataclasses import replace
 
     from posedyn.io.measurements import format_measurements
@@ -254,8 +253,7 @@ def test_gap_cli_writes_the_twin_with_the_named_effects(tmp_path):
     nominal, m, y = twin_campaign(3, mass_kg=7.0, joint_scale=(1.0, 0.7, 1.25, 1.0, 1.0, 1.0))
     measured = tmp_path / "meas.csv"
     measured.write_text(format_measurements(m, [c for c in m.conditions if not c.startswith("model_")]))
-    done = subprocess.run([sys.executable, "-m", "service", "gap", "--measured", str(measured), "--twin", "--out", str(tmp_path / "gap"), "--json"],
-                          capture_output=True, text=True, timeout=600)
+    done = run_cli("gap", "--measured", str(measured), "--twin", "--out", str(tmp_path / "gap"), "--json")
     assert done.returncode == 0, done.stderr
     doc = json.loads(done.stdout)
     fitted = {e["name"]: list(e["parameters"].values())[0] for e in doc["effects"]}
@@ -286,8 +284,8 @@ def test_gap_cli_writes_the_twin_with_the_named_effects(tmp_path):
     poses.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nb,1800,200,600,40\n")
     runs = {}
     for name, twin_file in (("nominal", root / "datasets/robots/kr_r2700_twin.toml"), ("updated", tmp_path / "gap/twin.toml")):
-        done = subprocess.run([sys.executable, "-m", "service", "schedule", "--twin", str(twin_file), "--poses", str(poses),
-                               "--cut", str(root / "datasets/seeds/hou2023_cut.toml"), "--json"], capture_output=True, text=True, timeout=600)
+        done = run_cli("schedule", "--twin", str(twin_file), "--poses", str(poses),
+                       "--cut", str(root / "datasets/seeds/hou2023_cut.toml"), "--json")
         assert done.returncode == 0, done.stderr
         runs[name] = json.loads(done.stdout)[0]
     q = robot.inverse(tool_pose(read_pose_table(poses), 0))

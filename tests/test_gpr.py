@@ -3,8 +3,6 @@ seed 004's reproduction, MTGP vs STGP, the physics prior, calibration, persisten
 
 import json
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -21,6 +19,7 @@ from posedyn.io.grid import read_grid
 from posedyn.io.twin_file import read_twin
 from posedyn.io.model_dir import load_model, save_model
 from posedyn.robot import Robot
+from tests.cli_helpers import run_cli
 
 
 # --- GP core ------------------------------------------------------------------------------
@@ -306,7 +305,7 @@ def test_physics_falls_back_without_reachable_poses(twin, datasets):
 
 
 def posedyn(*args):
-    return subprocess.run([sys.executable, "-m", "service", *map(str, args)], capture_output=True, text=True)
+    return run_cli(*args)
 
 
 def test_train_and_predict_cli_contract(datasets, tmp_path):

@@ -9,6 +9,7 @@ from scipy.linalg import eigh
 
 from posedyn.rcsa import DISPLACEMENT, connection_compliance, couple, decouple, finite_difference_tip, tool_change
 from posedyn.tool import Section, Tool, plane_matrices, shear_coefficient, tool_receptances
+from tests.cli_helpers import run_cli
 
 # seed 003 section 5.1: cemented carbide (Table 1); the reference tool a 20 mm rod with 50 mm
 # overhang, the target a two-flute 18 mm end mill with 45 mm overhang (fluted part taken here
@@ -243,8 +244,6 @@ def test_tool_change_cli_with_the_same_tool_gives_back_the_reference_modes(tmp_p
     modes (within 0.5 % in frequency, 3 % in stiffness); with seed 003's PCD end mill (its softer
     joint) the robot mode stays and the 2.4 kHz mode moves by 0.8 %."""
     import json
-    import subprocess
-    import sys
 
     from posedyn.io import read_modal_table
 
@@ -272,8 +271,8 @@ def test_tool_change_cli_with_the_same_tool_gives_back_the_reference_modes(tmp_p
     spindle.write_text("\n".join([header] + rows + fixed) + "\n")
     ref = datasets / "seeds/seed003_reference_tool.toml"
     for target, out in ((ref, tmp_path / "same.csv"), (datasets / "seeds/seed003_target_tool.toml", tmp_path / "pcd.csv")):
-        done = subprocess.run([sys.executable, "-m", "service", "tool-change", "--modes", str(spindle), "--reference-tool", str(ref), "--target-tool", str(target),
-                               "--poses", str(poses), "--out", str(out), "--json"], capture_output=True, text=True)
+        done = run_cli("tool-change", "--modes", str(spindle), "--reference-tool", str(ref), "--target-tool", str(target),
+                       "--poses", str(poses), "--out", str(out), "--json")
         assert done.returncode == 0, done.stderr
         assert json.loads(done.stdout)["poses"][0]["pose_id"] == "P5"
     given, same, pcd = read_modal_table(spindle), read_modal_table(tmp_path / "same.csv"), read_modal_table(tmp_path / "pcd.csv")
@@ -335,8 +334,6 @@ def test_schedule_and_the_service_take_a_tool_file(tmp_path, datasets, model_dir
     chain on the table `posedyn tool-change` writes (read back from its CSV), and the service's
     engine with the same tools the same numbers; its model_version names the tools."""
     import json
-    import subprocess
-    import sys
 
     from absorber.chain import ScheduleConfig, schedule_entries
     from posedyn.io import read_modal_table, read_pose_table, write_modal_table
@@ -352,7 +349,7 @@ def test_schedule_and_the_service_take_a_tool_file(tmp_path, datasets, model_dir
     ref, tgt = datasets / "seeds/seed003_reference_tool.toml", datasets / "seeds/seed003_target_tool.toml"
 
     def posedyn(*args):
-        done = subprocess.run([sys.executable, "-m", "service", *map(str, args)], capture_output=True, text=True)
+        done = run_cli(*map(str, args))
         assert done.returncode == 0, done.stderr
         return done.stdout
 

@@ -2,8 +2,6 @@
 
 import json
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pinocchio as pin
@@ -17,6 +15,7 @@ from posedyn.io.grid import read_grid
 from posedyn.io.twin_file import read_twin
 from posedyn.robot import Robot, ToolPose, abc_from_rotation, rotation_from_abc
 from posedyn.robot.twin import mass_matrix, normal_modes, twin_modes
+from tests.cli_helpers import run_cli
 
 ROBOTS = "datasets/robots"
 
@@ -208,10 +207,7 @@ def test_noise_free_campaign_is_the_twin(twin, datasets):
 def test_shipped_campaign_matches_its_recorded_recipe(datasets, tmp_path):
     """datasets/campaigns/seed003_twin_s1.csv is `posedyn twin campaign --grid seed003_grid.toml --seed 1`."""
     out = tmp_path / "again.csv"
-    result = subprocess.run(
-        [sys.executable, "-m", "service", "twin", "campaign", "--grid", datasets / "campaigns/seed003_grid.toml", "--seed", "1", "--out", out, "--json"],
-        capture_output=True, text=True,
-    )
+    result = run_cli("twin", "campaign", "--grid", datasets / "campaigns/seed003_grid.toml", "--seed", "1", "--out", out, "--json")
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout)["poses"] == 112
     again, shipped = read_modal_table(out), read_modal_table(datasets / "campaigns/seed003_twin_s1.csv")
@@ -223,15 +219,12 @@ def test_shipped_campaign_matches_its_recorded_recipe(datasets, tmp_path):
 
 
 def test_twin_modes_cli_and_bad_grid(datasets, tmp_path):
-    result = subprocess.run(
-        [sys.executable, "-m", "service", "twin", "modes", "--x-mm", "1500", "--y-mm", "100", "--z-mm", "600", "--beta-deg", "20", "--json"],
-        capture_output=True, text=True,
-    )
+    result = run_cli("twin", "modes", "--x-mm", "1500", "--y-mm", "100", "--z-mm", "600", "--beta-deg", "20", "--json")
     assert result.returncode == 0, result.stderr
     out = json.loads(result.stdout)
     assert len(out["modes"]) == 6 and 5 < out["modes"][0]["fn_hz"] < 40
     bad = tmp_path / "grid.toml"
     bad.write_text('[meta]\nkind = "pose_grid"\nsource = "test"\n[grid]\nx_mm = [1500]\ny_mm = [0]\nz_mm = ["high"]\nbeta_deg = [0]\n')
-    result = subprocess.run([sys.executable, "-m", "service", "twin", "campaign", "--grid", bad, "--out", tmp_path / "o.csv"], capture_output=True, text=True)
+    result = run_cli("twin", "campaign", "--grid", bad, "--out", tmp_path / "o.csv")
     assert result.returncode == 2 and "z_mm" in result.stderr and "grid.toml" in result.stderr and "Traceback" not in result.stderr
     assert not (tmp_path / "o.csv").exists()

@@ -3,8 +3,6 @@ robust absorber setting, and the same numbers from every caller of the per-pose 
 
 import csv
 import json
-import subprocess
-import sys
 from dataclasses import replace
 
 import numpy as np
@@ -20,6 +18,7 @@ from posedyn.stability import critical_points
 from posedyn.table import PoseSet
 from posedyn.uncertainty import ModalDistribution, distributions_from_table
 from tests.conftest import ROOT
+from tests.cli_helpers import run_cli
 
 CUT = ROOT / "datasets/seeds/hou2023_cut.toml"
 # seed 004's positions 3, 5, 7 (measured) and two poses beyond them (extrapolated: uncertain)
@@ -27,7 +26,7 @@ POSES = "pose_id,x_mm,y_mm,z_mm,beta_deg\nP3,1600,0,800,0\nP5,1400,0,800,0\nP7,1
 
 
 def posedyn(*args, cwd=ROOT):
-    return subprocess.run([sys.executable, "-m", "service", *map(str, args)], capture_output=True, text=True, cwd=cwd)
+    return run_cli(*args, cwd=cwd)
 
 
 def test_latin_hypercube_samples_have_the_distributions_moments():

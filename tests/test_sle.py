@@ -2,8 +2,6 @@
 
 import json
 import math
-import subprocess
-import sys
 from dataclasses import replace
 
 import numpy as np
@@ -12,6 +10,7 @@ import pytest
 from posedyn.dynamics import ToolTipDynamics, combine
 from posedyn.io import read_modal_table
 from posedyn.sle import SleCut, compensate, sle_m, sle_quasi_static_m, sle_time_domain_m
+from tests.cli_helpers import run_cli
 
 CUT = SleCut(teeth=3, kt_pa=597.3e6, kn_pa=59.8e6, tool_diameter_m=12.7e-3, helix_rad=math.radians(40), radial_depth_m=2e-3, axial_depth_m=2.5e-3, feed_per_tooth_m=0.25e-3)
 
@@ -86,7 +85,7 @@ def test_sle_cli_contract(datasets):
             "--tool-diameter-mm", 12.7, "--helix-deg", 40, "--radial-depth-mm", 2, "--axial-depth-mm", 2.5, "--feed-per-tooth-mm", 0.25, "--milling", "down"]
 
     def run(*extra):
-        result = subprocess.run([sys.executable, "-m", "service", "sle", *map(str, extra), *map(str, args), "--json"], capture_output=True, text=True)
+        result = run_cli("sle", *map(str, extra), *map(str, args), "--json")
         assert result.returncode == 0, result.stderr
         return json.loads(result.stdout)
 
