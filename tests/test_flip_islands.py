@@ -85,3 +85,18 @@ def test_the_island_scan_sees_what_one_count_above_it_cannot():
     assert count == 0 and resolved  # stable again above the island
     island, _ = floquet.flip_islands(char, [5.0e-3], [tau])
     assert island[0]
+
+
+@pytest.mark.parametrize("depth_m", [5.0e-3, 3.5e-3, 1.5e-3])
+def test_the_island_check_from_the_seed_scan_finds_the_island_below_an_answer(depth_m):
+    """The engine reuses the flip seeds' scan (same cut model and spacing, other depths) for the
+    island check below a coarse-level answer, plus one monodromy at 0.995 x the answer; where it
+    sees an island or a multiplier near -1, a refined scan decides. Above the island (3.5 and
+    5 mm) it is found; below it (1.5 mm) there is none."""
+    char = floquet.FloquetCharacteristic(STRUCTURE, CUT, 2 * floquet.SUBSTEPS_PER_RAD)
+    tau = float(CUT.tooth_period_s(RPM))
+    _, scans = floquet.flip_seeds(char, [0.7 * depth_m], [tau], [0])
+    _, _, covered = floquet._islands_from_seed_scan(char, scans, [0], [depth_m], [tau])
+    island, _ = floquet._coarse_islands(char, char, scans, [0], np.array([depth_m]), np.array([tau]), [0])
+    assert covered[0]
+    assert island[0] == (depth_m > 3e-3) == floquet.flip_islands(char, [depth_m], [tau])[0][0]

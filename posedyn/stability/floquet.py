@@ -78,7 +78,9 @@ is not an interval from some depth upwards: a real multiplier can pass -1 and co
 period-doubling island), and a search that misses the lower flip point reports the depth above
 the island with a count of 0 (the sweep's absorber poses: 5.5-9.2 mm reported where the cut
 chatters from 1.7-2.2 mm). `flip_islands` scans the real multipliers of M(2 a) (nu = -1) below
-every verified answer, first on the coarse cut model, then, where a multiplier is below -1 or
+every verified answer, first on the coarse cut model (for a job solved from the seeds, the flip
+seeds' own scan of that model is reused, `_coarse_islands`: 21 % of the exponential work of a
+single speed), then, where a multiplier is below -1 or
 within FLIP_NEAR of it, at the answer's own resolution (islands appear with a finer cut model);
 where one is found the job is solved again from the seeds at that resolution, and an answer the
 seeds cannot bring below the island is marked not verified. Hopf islands (complex multipliers)
@@ -569,14 +571,16 @@ def _flip_grid(a_scale, top: float) -> np.ndarray:
     return np.asarray(a_scale, dtype=float)[:, None] * np.geomspace(lo, top, points)[None, :]
 
 
-def flip_seeds(char, a_scale, tau, jobs) -> list:
+def flip_seeds(char, a_scale, tau, jobs):
     """[(job, depth)] where a real multiplier of M(2 a) passes below -1 between two of the scanned
     depths (the number of real multipliers below -1 grows; often just after a complex pair has
     met on the negative axis), placed by linear interpolation of Re sigma + 1 of the multiplier
     nearest -1; one batch for all the jobs of a structure (depth scale a_scale and delay tau per
-    job), depths FLIP_RANGE x the scale."""
+    job), depths FLIP_RANGE x the scale. Also returns the scan, {job: (depths, number below -1,
+    Re sigma + 1 nearest -1)}, which `_islands_from_seed_scan` reuses."""
     a = _flip_grid(a_scale, FLIP_RANGE[1])
     below, nearest = _flip_scan(char, a, np.asarray(tau, dtype=float))
+    scans = {j: (a[q], below[q], nearest[q]) for q, j in enumerate(jobs)}
     out = []
     for q, j in enumerate(jobs):
         cross = np.flatnonzero(np.diff(below[q]) > 0)
@@ -585,7 +589,7 @@ def flip_seeds(char, a_scale, tau, jobs) -> list:
             x, y = a[q, k : k + 2], nearest[q, k : k + 2]
             inside = np.all(np.isfinite(y)) and y[0] > 0 >= y[1]
             out.append((j, float(x[0] + (x[1] - x[0]) * y[0] / (y[0] - y[1])) if inside else float(np.sqrt(x[0] * x[1]))))
-    return out
+    return out, scans
 
 
 #: Flip islands (`flip_islands`): a coarse-model scan point whose multiplier nearest -1 is within
@@ -624,6 +628,47 @@ def flip_islands(char, depth, tau, refine: bool = True):
         b_fine, _ = _flip_scan(char, fine, tau[near_q])
         for q, k, row in zip(near_q, near_k, b_fine):
             hit[q] |= bool(np.any(row > below[q, 0]))
+    return hit, near
+
+
+def _islands_from_seed_scan(char, scans: dict, jobs, depth, tau):
+    """`flip_islands(..., refine=False)` for the jobs whose flip-seed scan (`flip_seeds`, same
+    cut model, same depth spacing) covers FLIP_RANGE[0] .. VERIFY_FRACTION x the depth: its
+    points below that depth plus one monodromy at VERIFY_FRACTION x the depth (the scan's points
+    need not fall on it). Returns (island, near, covered) per job; island and near are False where
+    not covered (the caller scans those)."""
+    depth = np.asarray(depth, dtype=float)
+    island, near, covered = (np.zeros(len(depth), bool) for _ in range(3))
+    for q, j in enumerate(jobs):
+        if j in scans:
+            a = scans[j][0]
+            covered[q] = a[0] <= FLIP_RANGE[0] * depth[q] * (1.0 + 1e-9) and a[-1] >= VERIFY_FRACTION * depth[q]
+    if not covered.any():
+        return island, near, covered
+    idx = np.flatnonzero(covered)
+    top_below, top_nearest = _flip_scan(char, VERIFY_FRACTION * depth[idx, None], np.asarray(tau, dtype=float)[idx])
+    for r, q in enumerate(idx):
+        a, below, nearest = scans[jobs[q]]
+        k = a < VERIFY_FRACTION * depth[q]
+        island[q] = bool(np.any(below[k] > below[0]) or top_below[r, 0] > below[0])
+        near[q] = bool(np.any(np.abs(nearest[k]) < FLIP_NEAR) or abs(top_nearest[r, 0]) < FLIP_NEAR)
+    return island, near, covered
+
+
+def _coarse_islands(full, seed_char, seed_scans: dict, jobs, depth, tau, levels):
+    """(island, near) of the island check on the coarse cut model for jobs with answers at
+    `depth` (refinement `levels`): from the flip-seed scan where it covers the range
+    (`_islands_from_seed_scan`; `seed_char` is the coarse model, possibly without the irrelevant
+    modes), else a scan of the whole structure (`full`). Where the seed scan sees an island or a
+    multiplier within FLIP_NEAR of -1 for a level-0 answer, a refined scan of the whole
+    structure decides (the seed scan samples other depths: a narrow island can fall between its
+    points and not between the refined scan's)."""
+    hit, near, covered = _islands_from_seed_scan(seed_char, seed_scans, jobs, depth, tau)
+    if not covered.all():
+        hit[~covered], near[~covered] = flip_islands(full, depth[~covered], tau[~covered], refine=False)
+    again = np.flatnonzero(covered & (hit | near) & (np.asarray(levels) == 0))
+    if len(again):
+        hit[again], near[again] = flip_islands(full, depth[again], tau[again])
     return hit, near
 
 
@@ -1248,6 +1293,7 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
         seed_m += list(mode[pick])
         seed_g += [np.nan] * len(pick)
         seed_v += [None] * len(pick)
+    seed_scans: dict = {}  # job -> its flip-seed scan (on char(s, seed_level)), reused by the island check
     if FLIP_POINTS:  # period-doubling seeds, which the zeroth order never gives (mode -1: the whole structure)
         lowest = {}
         for j, a_ in zip(seed_job, seed_a):
@@ -1256,7 +1302,9 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
         for s in range(len(dyns)):
             mine = [j for j in range(len(jobs)) if jobs[j][0] == s and np.isfinite(lowest.get(j, np.inf))]
             if mine:
-                for j, a_ in flip_seeds(char(s, seed_level), np.array([lowest[j] for j in mine]), tau_all[[jobs[j][1] for j in mine]], mine):
+                found, scans = flip_seeds(char(s, seed_level), np.array([lowest[j] for j in mine]), tau_all[[jobs[j][1] for j in mine]], mine)
+                seed_scans.update(scans)
+                for j, a_ in found:
                     seed_job.append(j)
                     seed_a.append(a_)
                     seed_t.append(np.pi)
@@ -1352,11 +1400,12 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
     for s, group in scan.items():
         group = np.array(group)
         levels = np.array([_level(points[j].substeps_per_rad, base) for j in group])
-        hit, near = flip_islands(char(s, 0, True), [points[j].depth_m for j in group], tau_all[[jobs[j][1] for j in group]], refine=False)
+        depths, taus = np.array([points[j].depth_m for j in group]), tau_all[[jobs[j][1] for j in group]]
+        hit, near = _coarse_islands(char(s, 0, True), char(s, seed_level), seed_scans if seed_level == 0 else {}, group, depths, taus, levels)
         hit &= levels == 0
         for level in np.unique(levels[(hit | near) & (levels > 0)]):
             sub = np.flatnonzero((hit | near) & (levels == level))
-            hit[sub] = flip_islands(char(s, int(level), True), [points[j].depth_m for j in group[sub]], tau_all[[jobs[j][1] for j in group[sub]]])[0]
+            hit[sub] = flip_islands(char(s, int(level), True), depths[sub], taus[sub])[0]
         for j in group[hit]:
             p = points[j]
             redo = None
