@@ -60,3 +60,18 @@ def test_hills_method_with_no_mode_within_reach_gives_no_points():
     char = floquet.FloquetCharacteristic(spindle, CUT, floquet.SUBSTEPS_PER_RAD)
     depth, theta = hill.hill_seeds(char.frf, char.free_eig()[0], CUT, float(CUT.tooth_period_s(RPM)))
     assert len(depth) == 0 and len(theta) == 0
+
+
+def test_an_undamped_mode_on_the_grid_does_not_break_the_seeds():
+    """A grid point exactly on an undamped resonance gives an infinite receptance: it is left out
+    (the repair that calls this must not fail where the bisection would have succeeded)."""
+    char = floquet.FloquetCharacteristic(STRUCTURE, CUT, floquet.SUBSTEPS_PER_RAD)
+    tau = float(CUT.tooth_period_s(RPM))
+
+    def frf(omega):
+        out = char.frf(omega)
+        out[np.abs(np.asarray(omega) - omega.flat[len(omega) // 2]) == 0] = np.inf
+        return out
+
+    depth, _ = hill.hill_seeds(frf, char.free_eig()[0], CUT, tau)
+    assert depth[0] == pytest.approx(hill.hill_seeds(char.frf, char.free_eig()[0], CUT, tau)[0][0], rel=1e-3)

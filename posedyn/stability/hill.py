@@ -93,7 +93,12 @@ def hill_seeds(frf, free_lam: np.ndarray, cut: Cut, tau: float):
     G = frf(omega[:, None] + j[None, :] * w_t)  # (W, P, 2, 2)
     Hk = force_harmonics(cut, 2 * HARMONICS)
     Hblock = Hk[(j[:, None] - j[None, :]) + 2 * HARMONICS]  # (P, P, 2, 2): H_(j - k)
-    B = np.matmul(G[:, :, None], Hblock[None]).transpose(0, 1, 3, 2, 4).reshape(len(omega), 2 * P, 2 * P)
+    with np.errstate(invalid="ignore"):
+        B = np.matmul(G[:, :, None], Hblock[None]).transpose(0, 1, 3, 2, 4).reshape(len(omega), 2 * P, 2 * P)
+    finite = np.all(np.isfinite(B), axis=(1, 2))  # a grid point on an undamped resonance
+    omega, B = omega[finite], B[finite]
+    if len(omega) < 2:
+        return np.zeros(0), np.zeros(0)
     lam = np.linalg.eigvals(B)
     # follow each branch: the nearest eigenvalue at the next frequency
     nxt = np.argmin(np.abs(lam[1:, None, :] - lam[:-1, :, None]), axis=2)  # (W - 1, 2P)
