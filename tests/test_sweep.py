@@ -27,7 +27,7 @@ from posedyn.io.twin_file import load_twin
 from posedyn.robot import ToolPose
 from posedyn.stability import Discretization, StabilityModel
 from posedyn.stability.batch import BatchStability
-from tests.cli_helpers import cli_in_process, json_in_process
+from tests.cli_helpers import cli_in_process, json_in_process, run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 TWIN = ROOT / "datasets/robots/kr_r2700_twin.toml"
@@ -135,11 +135,11 @@ def test_nyquist_gain_limit_matches_the_closed_loop_poles():
 # --- the sweep end to end ----------------------------------------------------------------------
 
 
-def sweep_cli(*args, check=True):
+def sweep_cli(*args):
+    """`posedyn sweep ARGS` as its own process (it starts a Dask cluster), asserting success."""
     cmd = [sys.executable, "-c", "from service.cli import main; main()", "sweep", *map(str, args)]
     out = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, timeout=900)
-    if check:
-        assert out.returncode == 0, out.stderr[-3000:]
+    assert out.returncode == 0, out.stderr[-3000:]
     return out
 
 
@@ -179,9 +179,9 @@ def test_sweep_writes_results_chunks_and_report(twin_sweep):
 
 
 def test_sweep_refuses_to_mix_runs(twin_sweep, grid):
-    again = sweep_cli("--twin", TWIN, "--grid", grid, "--cut", CUT, "--out", twin_sweep, "--workers", "1", "--chunk-size", "4", check=False)
+    again = run_cli("sweep", "--twin", TWIN, "--grid", grid, "--cut", CUT, "--out", twin_sweep, "--workers", "1", "--chunk-size", "4")
     assert again.returncode == 2 and "--resume" in again.stderr
-    changed = sweep_cli("--twin", TWIN, "--grid", grid, "--cut", CUT, "--out", twin_sweep, "--workers", "1", "--chunk-size", "4", "--steps", "30", "--resume", check=False)
+    changed = run_cli("sweep", "--twin", TWIN, "--grid", grid, "--cut", CUT, "--out", twin_sweep, "--workers", "1", "--chunk-size", "4", "--steps", "30", "--resume")
     assert changed.returncode == 2 and "fingerprint" in changed.stderr
 
 
@@ -221,9 +221,9 @@ def test_sweep_with_a_trained_model_reports_uncertainty_and_equals_posedyn_sched
 def test_sweep_bad_input_names_the_file(tmp_path):
     bad = tmp_path / "grid.toml"
     bad.write_text('[meta]\nkind = "pose_grid"\nsource = "t"\n[grid]\nx_mm = [1300, "a"]\ny_mm = [0]\nz_mm = [600]\nbeta_deg = [0]\n')
-    out = sweep_cli("--twin", TWIN, "--grid", bad, "--cut", CUT, "--out", tmp_path / "out", check=False)
+    out = run_cli("sweep", "--twin", TWIN, "--grid", bad, "--cut", CUT, "--out", tmp_path / "out")
     assert out.returncode == 2 and str(bad) in out.stderr and "x_mm" in out.stderr and "Traceback" not in out.stderr
-    missing = sweep_cli("--twin", TWIN, "--grid", tmp_path / "nope.toml", "--cut", CUT, "--out", tmp_path / "out", check=False)
+    missing = run_cli("sweep", "--twin", TWIN, "--grid", tmp_path / "nope.toml", "--cut", CUT, "--out", tmp_path / "out")
     assert missing.returncode == 2 and "nope.toml" in missing.stderr
 
 
