@@ -68,10 +68,12 @@ needed FINE_CHECK sub-steps per radian or more, the count is repeated at half it
 h is sampled on an interpolant (`segment_interpolants`, `circle_monodromies`,
 `monodromy_polynomial`: M(a (1 - nu)) is entire in nu, each segment's exponential needs 8-16
 Taylor terms), every sample with a Rouche bound on the interpolant's error, else directly. A
-non-zero count triggers `_repair`: Newton from the thetas where an eigenvalue of M comes nearest
-1 / nu at that depth (`_descend`; before the flip seeds, period-doubling branches were the usual
-misses), else bisection in depth on the count, then Newton from the nearest multipliers; the
-result says `repaired=True`.
+non-zero count triggers `_repair`: Newton from the boundary points of Hill's method (`hill`,
+two harmonics: the branches an interrupted cut puts between modes at or below a few
+tooth-passing frequencies, which the zeroth order cannot seed), else from the thetas where an
+eigenvalue of M comes nearest 1 / nu at that depth (`_descend`; before the flip seeds,
+period-doubling branches were the usual misses), else bisection in depth on the count, then
+Newton from the nearest multipliers; the result says `repaired=True`.
 
 Flip islands. The count at one depth says nothing about depths below it where the unstable set
 is not an interval from some depth upwards: a real multiplier can pass -1 and come back (a
