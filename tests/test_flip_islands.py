@@ -87,15 +87,18 @@ def test_the_island_scan_sees_what_one_count_above_it_cannot():
     assert island[0]
 
 
+@pytest.mark.parametrize("scale", [0.7, 2.5, 6.0])
 @pytest.mark.parametrize("depth_m", [5.0e-3, 3.5e-3, 1.5e-3])
-def test_the_island_check_from_the_seed_scan_finds_the_island_below_an_answer(depth_m):
+def test_the_island_check_from_the_seed_scan_finds_the_island_below_an_answer(depth_m, scale):
     """The engine reuses the flip seeds' scan (same cut model and spacing, other depths) for the
-    island check below a coarse-level answer, plus one monodromy at 0.995 x the answer; where it
-    sees an island or a multiplier near -1, a refined scan decides. Above the island (3.5 and
-    5 mm) it is found; below it (1.5 mm) there is none."""
+    island check below a coarse-level answer, plus one monodromy at 0.995 x the answer and, where
+    the seeds' depth scale lies above the answer (scale 2.5; at 6 the island lies below the
+    scan), the points from 0.1 x the answer up to the scan's first; where it sees an island or a
+    multiplier near -1, a refined scan decides. Above the island (3.5 and 5 mm) it is found;
+    below it (1.5 mm) there is none."""
     char = floquet.FloquetCharacteristic(STRUCTURE, CUT, 2 * floquet.SUBSTEPS_PER_RAD)
     tau = float(CUT.tooth_period_s(RPM))
-    _, scans = floquet.flip_seeds(char, [0.7 * depth_m], [tau], [0])
+    _, scans = floquet.flip_seeds(char, [scale * depth_m], [tau], [0])
     _, _, covered = floquet._islands_from_seed_scan(char, scans, [0], [depth_m], [tau])
     island, _ = floquet._coarse_islands(char, char, scans, [0], np.array([depth_m]), np.array([tau]), [0])
     assert covered[0]

@@ -82,7 +82,7 @@ the island with a count of 0 (the sweep's absorber poses: 5.5-9.2 mm reported wh
 chatters from 1.7-2.2 mm). `flip_islands` scans the real multipliers of M(2 a) (nu = -1) below
 every verified answer, first on the coarse cut model (for a job solved from the seeds, the flip
 seeds' own scan of that model is reused, `_coarse_islands`: 21 % of the exponential work of a
-single speed), then, where a multiplier is below -1 or
+single speed, 14 % of a 300-speed lobe diagram), then, where a multiplier is below -1 or
 within FLIP_NEAR of it, at the answer's own resolution (islands appear with a finer cut model);
 where one is found the job is solved again from the seeds at that resolution, and an answer the
 seeds cannot bring below the island is marked not verified. Hopf islands (complex multipliers)
@@ -635,25 +635,35 @@ def flip_islands(char, depth, tau, refine: bool = True):
 
 def _islands_from_seed_scan(char, scans: dict, jobs, depth, tau):
     """`flip_islands(..., refine=False)` for the jobs whose flip-seed scan (`flip_seeds`, same
-    cut model, same depth spacing) covers FLIP_RANGE[0] .. VERIFY_FRACTION x the depth: its
-    points below that depth plus one monodromy at VERIFY_FRACTION x the depth (the scan's points
-    need not fall on it). Returns (island, near, covered) per job; island and near are False where
-    not covered (the caller scans those)."""
+    cut model, same depth spacing) reaches VERIFY_FRACTION x the depth: its points below that
+    depth, the points at its spacing from FLIP_RANGE[0] x the depth up to its first one (where
+    the answer lies below the scan's scale) and one at VERIFY_FRACTION x the depth, in one batch.
+    Returns (island, near, covered) per job; island and near are False where not covered (the
+    caller scans those)."""
     depth = np.asarray(depth, dtype=float)
     island, near, covered = (np.zeros(len(depth), bool) for _ in range(3))
     for q, j in enumerate(jobs):
-        if j in scans:
-            a = scans[j][0]
-            covered[q] = a[0] <= FLIP_RANGE[0] * depth[q] * (1.0 + 1e-9) and a[-1] >= VERIFY_FRACTION * depth[q]
+        covered[q] = j in scans and scans[j][0][-1] >= VERIFY_FRACTION * depth[q]
     if not covered.any():
         return island, near, covered
     idx = np.flatnonzero(covered)
-    top_below, top_nearest = _flip_scan(char, VERIFY_FRACTION * depth[idx, None], np.asarray(tau, dtype=float)[idx])
-    for r, q in enumerate(idx):
+    lows = []
+    for q in idx:
+        a = scans[jobs[q]][0]
+        start = FLIP_RANGE[0] * depth[q]
+        count = max(0, int(np.ceil(np.log(a[0] / start) / np.log(a[1] / a[0]) - 1e-9)))
+        lows.append(start * (a[1] / a[0]) ** np.arange(count))
+    width = max(len(x) for x in lows) + 1
+    extra = np.array([np.concatenate([np.full(width - 1 - len(x), x[0] if len(x) else VERIFY_FRACTION * depth[q]), x, [VERIFY_FRACTION * depth[q]]])
+                      for x, q in zip(lows, idx)])  # padded in front by repeats
+    extra_below, extra_nearest = _flip_scan(char, extra, np.asarray(tau, dtype=float)[idx])
+    for r, (q, x) in enumerate(zip(idx, lows)):
         a, below, nearest = scans[jobs[q]]
         k = a < VERIFY_FRACTION * depth[q]
-        island[q] = bool(np.any(below[k] > below[0]) or top_below[r, 0] > below[0])
-        near[q] = bool(np.any(np.abs(nearest[k]) < FLIP_NEAR) or abs(top_nearest[r, 0]) < FLIP_NEAR)
+        mine = slice(width - 1 - len(x), width)  # the low points and the one at the top
+        first = extra_below[r, mine][0] if len(x) else below[0]
+        island[q] = bool(np.any(below[k] > first) or np.any(extra_below[r, mine] > first))
+        near[q] = bool(np.any(np.abs(nearest[k]) < FLIP_NEAR) or np.any(np.abs(extra_nearest[r, mine]) < FLIP_NEAR))
     return island, near, covered
 
 
