@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tests.cli_helpers import json_in_process, strict_json
+from tests.cli_helpers import json_in_process, run_cli, strict_json
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "datasets"
@@ -43,7 +43,7 @@ def small(tmp_path_factory):
 
 
 def test_train_with_one_pose_folds_is_valid_json_and_says_why_r2_is_null(small):
-    out = json_of("train", small / "three.csv", "--cv", "3", "--cut", CUT, "--out", small / "model")
+    out = json_in_process("train", small / "three.csv", "--cv", "3", "--cut", CUT, "--out", small / "model")
     entry = out["cv"]["x1.fn_hz"]
     assert entry["r2_mean"] is None and entry["r2_std"] is None and "fewer than two poses" in entry["note"]
     assert entry["r2_pooled"] is not None and math.isfinite(entry["rmse"])
@@ -78,13 +78,13 @@ def test_every_command_prints_strict_json_on_small_inputs(small, tmp_path):
     grid.write_text('[meta]\nkind = "pose_grid"\nsource = "test"\n\n[[poses]]\nx_mm = 1600\ny_mm = 0\nz_mm = 600\nbeta_deg = 0\n')
     json_in_process("twin", "campaign", "--grid", grid, "--out", tmp_path / "campaign.csv")
     json_in_process("sweep", "--twin", DATA / "robots/kr_r2700_twin.toml", "--grid", grid, "--cut", DATA / "cuts/sweep_demo_cut.toml", "--out", tmp_path / "sweep", "--workers", "1", "--no-lobes")
-    made = run("gap-campaign", "--cut", CUT, "--out", tmp_path / "meas.csv", "--poses", "2")
+    made = run_cli("gap-campaign", "--cut", CUT, "--out", tmp_path / "meas.csv", "--poses", "2")
     assert made.returncode == 0, made.stderr
     json_in_process("gap", "--measured", tmp_path / "meas.csv", "--twin", "--cut", CUT, "--out", tmp_path / "gap")
 
 
 def test_a_command_without_a_cut_names_both_ways_to_give_one(small, tmp_path):
-    done = run("sweep", "--twin", DATA / "robots/kr_r2700_twin.toml", "--grid", DATA / "campaigns/seed003_grid.toml", "--out", tmp_path / "o")
+    done = run_cli("sweep", "--twin", DATA / "robots/kr_r2700_twin.toml", "--grid", DATA / "campaigns/seed003_grid.toml", "--out", tmp_path / "o")
     assert done.returncode == 2 and "--cut" in done.stderr and "cut.toml" in done.stderr and "Traceback" not in done.stderr
 
 

@@ -35,7 +35,7 @@ import scipy.optimize
 from posedyn.errors import InputError, check_choice
 from posedyn.io import format_modal_table
 from posedyn.posemodel._gp import Predictor, fit_gps
-from posedyn.robot import direction_rows, tool_pose, twin_modes
+from posedyn.robot import direction_rows, tool_pose
 from posedyn.robot.twin import modes_at, pose_inertia
 from posedyn.table import DIRECTIONS, JOINT_COLUMNS, MODAL_PARAMS, ModalTable, PoseSet
 from posedyn.uncertainty import ModalDistribution
@@ -166,12 +166,14 @@ def pose_joints(robot, poses: PoseSet) -> np.ndarray:
 
 def _twin_log_values(robot, params, q: np.ndarray, targets: list[str], robot_modes: int, inertias=None) -> np.ndarray:
     """`inertias`: the `pose_inertia` of every q with these params' masses (a fit of the joint
-    stiffnesses computes them once)."""
-    data = robot.model.createData()
+    stiffnesses computes them once; computed here otherwise)."""
+    if inertias is None:
+        data = robot.model.createData()
+        inertias = [pose_inertia(robot, qi, params, data) for qi in q]
     out = np.full((len(q), len(targets)), np.nan)
     parsed = [parse_target(t) for t in targets]
-    for i, qi in enumerate(q):
-        modes = modes_at(inertias[i], params) if inertias is not None else twin_modes(robot, qi, params, data)
+    for i in range(len(q)):
+        modes = modes_at(inertias[i], params)
         rows = {d: direction_rows(modes, d, robot_modes) for d in DIRECTIONS}
         for j, (d, m, param) in enumerate(parsed):
             if m <= len(rows[d]) and param in PARAMS:

@@ -614,8 +614,7 @@ def flip_islands(char, depth, tau, refine: bool = True):
     tau = np.broadcast_to(np.asarray(tau, dtype=float), depth.shape)
     a = _flip_grid(depth, VERIFY_FRACTION)
     below, nearest = _flip_scan(char, a, tau)
-    hit = np.any(below > below[:, :1], axis=1)
-    near = np.any(np.abs(nearest) < FLIP_NEAR, axis=1)
+    hit, near = _island_verdict(below, nearest)
     near_q, near_k = [], []
     for q in np.flatnonzero(~hit) if refine else ():
         y = nearest[q]
@@ -631,6 +630,12 @@ def flip_islands(char, depth, tau, refine: bool = True):
         for q, k, row in zip(near_q, near_k, b_fine):
             hit[q] |= bool(np.any(row > below[q, 0]))
     return hit, near
+
+
+def _island_verdict(below, nearest):
+    """(island, near) per row of a scan in increasing depth (`_flip_scan`): more real multipliers
+    below -1 somewhere than at the first depth; some Re sigma + 1 within FLIP_NEAR of 0."""
+    return np.any(below > below[:, :1], axis=1), np.any(np.abs(nearest) < FLIP_NEAR, axis=1)
 
 
 def _islands_from_seed_scan(char, scans: dict, jobs, depth, tau):
@@ -651,19 +656,18 @@ def _islands_from_seed_scan(char, scans: dict, jobs, depth, tau):
     for q in idx:
         a = scans[jobs[q]][0]
         start = FLIP_RANGE[0] * depth[q]
-        count = max(0, int(np.ceil(np.log(a[0] / start) / np.log(a[1] / a[0]) - 1e-9)))
-        lows.append(start * (a[1] / a[0]) ** np.arange(count))
-    width = max(len(x) for x in lows) + 1
-    extra = np.array([np.concatenate([np.full(width - 1 - len(x), x[0] if len(x) else VERIFY_FRACTION * depth[q]), x, [VERIFY_FRACTION * depth[q]]])
-                      for x, q in zip(lows, idx)])  # padded in front by repeats
+        lows.append(start * (a[1] / a[0]) ** np.arange(max(0, int(np.ceil(np.log(a[0] / start) / np.log(a[1] / a[0]) - 1e-9)))))
+    width = max(len(x) for x in lows) + 1  # the low points, then the top one (repeated to fill the row)
+    extra = np.array([np.concatenate([x, np.full(width - len(x), VERIFY_FRACTION * depth[q])]) for x, q in zip(lows, idx)])
     extra_below, extra_nearest = _flip_scan(char, extra, np.asarray(tau, dtype=float)[idx])
     for r, (q, x) in enumerate(zip(idx, lows)):
         a, below, nearest = scans[jobs[q]]
         k = a < VERIFY_FRACTION * depth[q]
-        mine = slice(width - 1 - len(x), width)  # the low points and the one at the top
-        first = extra_below[r, mine][0] if len(x) else below[0]
-        island[q] = bool(np.any(below[k] > first) or np.any(extra_below[r, mine] > first))
-        near[q] = bool(np.any(np.abs(nearest[k]) < FLIP_NEAR) or np.any(np.abs(extra_nearest[r, mine]) < FLIP_NEAR))
+        n = len(x)
+        row_below = np.concatenate([extra_below[r, :n], below[k], extra_below[r, n:]])
+        row_nearest = np.concatenate([extra_nearest[r, :n], nearest[k], extra_nearest[r, n:]])
+        hit, close = _island_verdict(row_below[None], row_nearest[None])
+        island[q], near[q] = hit[0], close[0]
     return island, near, covered
 
 
