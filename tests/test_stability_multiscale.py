@@ -13,7 +13,7 @@ import pytest
 
 import independent_milling_sim as sim
 from posedyn.dynamics import ToolTipDynamics
-from posedyn.stability import Cut, Discretization, StabilityModel, critical_points
+from posedyn.stability import Cut, Discretization, StabilityModel, critical_lobes, critical_points
 from posedyn.table import Mode
 
 #: The demo sweep's model at pose x1700_y-100_z600_b40 (issue 17): direction, fn_hz, zeta, k_n_per_m.
@@ -51,6 +51,17 @@ def test_depth_matches_the_independent_simulation_at_four_speeds(rpm, depth_mm):
     result = critical_points([structure(TABLE)], CUT, rpm)[0]
     assert result.converged
     assert result.depth_m * 1e3 == pytest.approx(depth_mm, rel=0.02)
+
+
+def test_lobes_shared_among_processes_are_the_lobes_of_one_process():
+    """`critical_lobes(..., workers=2)` (every other speed in a forked process) gives the same
+    converged points as one process (to rounding), in the order of the speeds."""
+    rpm = np.linspace(4000.0, 6000.0, 32)
+    one = critical_lobes(structure(TABLE), CUT, rpm)
+    two = critical_lobes(structure(TABLE), CUT, rpm, workers=2)
+    assert all(r.converged for r in one) and len(two) == len(rpm)
+    np.testing.assert_allclose([(r.depth_m, r.chatter_hz) for r in two], [(r.depth_m, r.chatter_hz) for r in one], rtol=1e-12)  # batches differ: rounding
+    assert len({r.depth_m for r in one}) > 16  # the speeds' own answers, not one repeated
 
 
 def test_two_methods_agree_on_the_spindle_modes():

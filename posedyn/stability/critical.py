@@ -12,6 +12,8 @@ error is not estimated (`converged` None) - at low speed with kHz modes it can b
 from __future__ import annotations
 
 import math
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -98,13 +100,35 @@ def _sdm_points(structures, cut, rpm, steps, frequencies) -> list[StabilityResul
     return out
 
 
-def critical_lobes(dyn: ToolTipDynamics, cut: Cut, rpm, steps: int | None = None) -> list[StabilityResult]:
+#: Fewest speeds a lobe diagram gives each process (below this one process does them all).
+SPEEDS_PER_WORKER = 16
+
+
+def critical_lobes(dyn: ToolTipDynamics, cut: Cut, rpm, steps: int | None = None, workers: int = 1) -> list[StabilityResult]:
     """The StabilityResult of one structure at many speeds (stability lobes): the converged
     engine's batched `floquet.lobes` by default, verified per speed by the multiplier count (a
-    speed whose count fails is flagged not converged), the semi-discretization with `steps`."""
+    speed whose count fails is flagged not converged), the semi-discretization with `steps`.
+
+    `workers` > 1 shares the engine's speeds among that many processes (this one and forked
+    children; every k-th speed to one, so each gets low and high speeds alike). The speeds are
+    solved independently, so the answers are the same as in one process; where the platform
+    cannot fork, or there are fewer than SPEEDS_PER_WORKER speeds a process, one does them all."""
     rpm = np.atleast_1d(np.asarray(rpm, dtype=float))
     if steps is not None:
         return critical_points([dyn] * len(rpm), cut, rpm, steps, frequencies=False)
+    workers = max(1, min(int(workers), len(rpm) // SPEEDS_PER_WORKER))
+    if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
+        with ProcessPoolExecutor(workers - 1, mp_context=multiprocessing.get_context("fork")) as pool:
+            shares = [pool.submit(_lobe_points, dyn, cut, rpm[k::workers]) for k in range(1, workers)]
+            points: list = [None] * len(rpm)
+            points[0::workers] = _lobe_points(dyn, cut, rpm[0::workers])
+            for k, share in enumerate(shares, start=1):
+                points[k::workers] = share.result()
+        return points
+    return _lobe_points(dyn, cut, rpm)
+
+
+def _lobe_points(dyn: ToolTipDynamics, cut: Cut, rpm: np.ndarray) -> list[StabilityResult]:
     lobes = floquet.lobes(dyn, cut, rpm, rel_tol=REL_TOL, verify=True)
     return [
         StabilityResult(float(d), float(f), "floquet", bool(c and v), float(e))

@@ -141,6 +141,7 @@ def lobes(
     order: int = ORDER,
     csv_out: Optional[Path] = typer.Option(None, "--csv", help="Write rpm, critical_depth_mm to this CSV."),
     plot: Optional[Path] = typer.Option(None, "--plot", help="Write a PNG of the lobes."),
+    workers: int = typer.Option(2, "--workers", min=1, help="Processes sharing the speeds (floquet; one core each)."),
     as_json: bool = JSON,
 ):
     """Stability lobes: critical depth against spindle speed, and the absolute limit."""
@@ -152,7 +153,7 @@ def lobes(
     rpm = np.linspace(rpm_min, rpm_max, rpm_steps)
     converged = None
     if method is Method.floquet:
-        results = critical_lobes(model.dyn, model.cut, rpm)
+        results = critical_lobes(model.dyn, model.cut, rpm, workers=workers)
         depth = np.array([r.depth_m for r in results])
         converged = [r.converged for r in results]
         absolute = zoa.absolute_limit_m(model.dyn, model.cut)
