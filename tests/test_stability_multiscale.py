@@ -7,13 +7,14 @@ by a session that never read the engine) and the refined semi-discretization."""
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 import pytest
 
 import independent_milling_sim as sim
 from posedyn.dynamics import ToolTipDynamics
-from posedyn.stability import Cut, Discretization, StabilityModel, critical_lobes, critical_points
+from posedyn.stability import Cut, Discretization, StabilityModel, critical, critical_lobes, critical_points
 from posedyn.table import Mode
 
 #: The demo sweep's model at pose x1700_y-100_z600_b40 (issue 17): direction, fn_hz, zeta, k_n_per_m.
@@ -53,15 +54,31 @@ def test_depth_matches_the_independent_simulation_at_four_speeds(rpm, depth_mm):
     assert result.depth_m * 1e3 == pytest.approx(depth_mm, rel=0.02)
 
 
-def test_lobes_shared_among_processes_are_the_lobes_of_one_process():
+_PARENT = os.getpid()
+_SHARE = critical._lobe_points
+
+
+def _dies_in_a_child(dyn, cut, rpm):
+    """`critical._lobe_points` whose forked copies die at once (a killed or out-of-memory child)."""
+    if os.getpid() != _PARENT:
+        os._exit(1)
+    return _SHARE(dyn, cut, rpm)
+
+
+def test_lobes_shared_among_processes_are_the_lobes_of_one_process(monkeypatch):
     """`critical_lobes(..., workers=2)` (every other speed in a forked process) gives the same
-    converged points as one process (to rounding), in the order of the speeds."""
+    converged points as one process (to rounding), in the order of the speeds; when the child
+    dies, its share is computed in this process and the answer is the same."""
     rpm = np.linspace(4000.0, 6000.0, 32)
     one = critical_lobes(structure(TABLE), CUT, rpm)
     two = critical_lobes(structure(TABLE), CUT, rpm, workers=2)
     assert all(r.converged for r in one) and len(two) == len(rpm)
-    np.testing.assert_allclose([(r.depth_m, r.chatter_hz) for r in two], [(r.depth_m, r.chatter_hz) for r in one], rtol=1e-12)  # batches differ: rounding
+    expected = [(r.depth_m, r.chatter_hz) for r in one]
+    np.testing.assert_allclose([(r.depth_m, r.chatter_hz) for r in two], expected, rtol=1e-12)  # batches differ: rounding
     assert len({r.depth_m for r in one}) > 16  # the speeds' own answers, not one repeated
+    monkeypatch.setattr(critical, "_lobe_points", _dies_in_a_child)
+    survived = critical_lobes(structure(TABLE), CUT, rpm, workers=2)
+    np.testing.assert_allclose([(r.depth_m, r.chatter_hz) for r in survived], expected, rtol=1e-12)
 
 
 def test_two_methods_agree_on_the_spindle_modes():

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 
 import numpy as np
@@ -112,18 +113,22 @@ def critical_lobes(dyn: ToolTipDynamics, cut: Cut, rpm, steps: int | None = None
     `workers` > 1 shares the engine's speeds among that many processes (this one and forked
     children; every k-th speed to one, so each gets low and high speeds alike). The speeds are
     solved independently, so the answers are the same as in one process; where the platform
-    cannot fork, or there are fewer than SPEEDS_PER_WORKER speeds a process, one does them all."""
+    cannot fork, this is a daemon process, or there are fewer than SPEEDS_PER_WORKER speeds a
+    process, one does them all; a child that dies has its share computed here."""
     rpm = np.atleast_1d(np.asarray(rpm, dtype=float))
     if steps is not None:
         return critical_points([dyn] * len(rpm), cut, rpm, steps, frequencies=False)
     workers = max(1, min(int(workers), len(rpm) // SPEEDS_PER_WORKER))
-    if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
+    if workers > 1 and "fork" in multiprocessing.get_all_start_methods() and not multiprocessing.current_process().daemon:
         with ProcessPoolExecutor(workers - 1, mp_context=multiprocessing.get_context("fork")) as pool:
             shares = [pool.submit(_lobe_points, dyn, cut, rpm[k::workers]) for k in range(1, workers)]
             points: list = [None] * len(rpm)
             points[0::workers] = _lobe_points(dyn, cut, rpm[0::workers])
             for k, share in enumerate(shares, start=1):
-                points[k::workers] = share.result()
+                try:
+                    points[k::workers] = share.result()
+                except BrokenProcessPool:  # a child that died (killed, out of memory): its share here
+                    points[k::workers] = _lobe_points(dyn, cut, rpm[k::workers])
         return points
     return _lobe_points(dyn, cut, rpm)
 
