@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import multiprocessing
+import threading
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
@@ -113,13 +114,13 @@ def critical_lobes(dyn: ToolTipDynamics, cut: Cut, rpm, steps: int | None = None
     `workers` > 1 shares the engine's speeds among that many processes (this one and forked
     children; every k-th speed to one, so each gets low and high speeds alike). The speeds are
     solved independently, so the answers are the same as in one process; where the platform
-    cannot fork, this is a daemon process, or there are fewer than SPEEDS_PER_WORKER speeds a
+    cannot fork, this is a daemon process or runs other threads, or there are fewer than SPEEDS_PER_WORKER speeds a
     process, one does them all; a child that dies has its share computed here."""
     rpm = np.atleast_1d(np.asarray(rpm, dtype=float))
     if steps is not None:
         return critical_points([dyn] * len(rpm), cut, rpm, steps, frequencies=False)
     workers = max(1, min(int(workers), len(rpm) // SPEEDS_PER_WORKER))
-    if workers > 1 and "fork" in multiprocessing.get_all_start_methods() and not multiprocessing.current_process().daemon:
+    if workers > 1 and _can_fork():
         with ProcessPoolExecutor(workers - 1, mp_context=multiprocessing.get_context("fork")) as pool:
             shares = [pool.submit(_lobe_points, dyn, cut, rpm[k::workers]) for k in range(1, workers)]
             points: list = [None] * len(rpm)
@@ -131,6 +132,13 @@ def critical_lobes(dyn: ToolTipDynamics, cut: Cut, rpm, steps: int | None = None
                     points[k::workers] = _lobe_points(dyn, cut, rpm[k::workers])
         return points
     return _lobe_points(dyn, cut, rpm)
+
+
+def _can_fork() -> bool:
+    """Fork only where it is safe and allowed: the platform has it, this process is no daemon
+    (which may not have children) and runs one thread (a lock another thread holds would stay
+    held in the child forever)."""
+    return "fork" in multiprocessing.get_all_start_methods() and not multiprocessing.current_process().daemon and threading.active_count() == 1
 
 
 def _lobe_points(dyn: ToolTipDynamics, cut: Cut, rpm: np.ndarray) -> list[StabilityResult]:

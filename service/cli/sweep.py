@@ -16,7 +16,7 @@ from posedyn.errors import InputError
 from posedyn.io.cut import read_cut
 from service import html
 from service.cli.common import console, resolve_cut
-from service.sweep import SweepSpec, representative_lobes, run_sweep, write_report
+from service.sweep import SweepSpec, run_sweep, write_report
 
 
 def sweep(
@@ -60,8 +60,9 @@ def sweep(
     show = sys.stderr.isatty() and not as_json
     with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(), console=console, disable=not show) as bar:
         task = bar.add_task("chunks", total=None)
-        outcome = run_sweep(spec, out, workers=workers, scheduler=scheduler, resume=resume, progress=lambda done, total: bar.update(task, completed=done, total=total))
-    lobe_curves = representative_lobes(spec.to_json(), outcome.poses, outcome.rows, outcome.grid_twin, speeds=lobe_speeds) if lobes else []
+        outcome = run_sweep(spec, out, workers=workers, scheduler=scheduler, resume=resume, progress=lambda done, total: bar.update(task, completed=done, total=total),
+                            lobe_speeds=lobe_speeds if lobes else 0)
+    lobe_curves = outcome.lobes
     provenance = _provenance(spec, outcome, outcome.grid_twin)
     provenance["software"] = html.software_versions()
     provenance["written"] = html.now_utc()

@@ -178,10 +178,11 @@ def _mm(depth_m: float):
 # --- lobes at representative poses -------------------------------------------------------------
 
 
-def representative_lobes(spec_json: str, poses: PoseSet, rows: list[dict], grid_twin: str | None = None, speeds: int = 40) -> list[dict]:
+def representative_lobes(spec_json: str, poses: PoseSet, rows: list[dict], grid_twin: str | None = None, speeds: int = 40, mapper=None) -> list[dict]:
     """Stability lobes (`posedyn.stability.critical_lobes`, the sweep's engine) from 0.5 to 1.5 times the
     cut's speed, without and with the absorber at its scheduled field, at the poses with the
-    smallest, the median and the largest critical depth."""
+    smallest, the median and the largest critical depth. `mapper(fn, jobs)` -> [fn(job), ...]
+    computes the curves (default here, one after the other; the sweep runs them on its cluster)."""
     ctx = context(spec_json, grid_twin)
     ranked = sorted((r["critical_depth_mm"], i) for i, r in enumerate(rows) if r.get("critical_depth_mm") is not None and r.get("field_mt") is not None)
     if not ranked:
@@ -189,14 +190,19 @@ def representative_lobes(spec_json: str, poses: PoseSet, rows: list[dict], grid_
     picks = {"softest": ranked[0][1], "median": ranked[len(ranked) // 2][1], "stiffest": ranked[-1][1]}
     found = pose_modes_of(ctx, poses, sorted(set(picks.values())))
     rpm = np.linspace(0.5, 1.5, speeds) * ctx.schedule.rpm
-    out = []
+    chosen, jobs = [], []
     for label, i in picks.items():
-        if i not in found or any(e["pose_id"] == poses.pose_id[i] for e in out):
+        if i not in found or any(poses.pose_id[i] == poses.pose_id[k] for _, k in chosen):
             continue
+        chosen.append((label, i))
         field_t = rows[i]["field_mt"] * 1e-3
-        curves = []
-        for dyn in (found[i].dyn, coupled(found[i].dyn, ctx.schedule, field_t)):
-            results = critical_lobes(dyn, ctx.schedule.cut, rpm, ctx.schedule.steps)
-            curves.append([r.depth_m * 1e3 if math.isfinite(r.depth_m) else None for r in results])
-        out.append({"label": label, "pose_id": poses.pose_id[i], "rpm": rpm.tolist(), "depth_mm": curves[0], "depth_with_absorber_mm": curves[1], "field_mt": rows[i]["field_mt"], "cut_rpm": ctx.schedule.rpm})
-    return out
+        jobs += [(dyn, ctx.schedule.cut, rpm, ctx.schedule.steps) for dyn in (found[i].dyn, coupled(found[i].dyn, ctx.schedule, field_t))]
+    curves = (mapper or (lambda fn, items: [fn(x) for x in items]))(lobe_depths_mm, jobs)
+    return [{"label": label, "pose_id": poses.pose_id[i], "rpm": rpm.tolist(), "depth_mm": curves[2 * q], "depth_with_absorber_mm": curves[2 * q + 1],
+             "field_mt": rows[i]["field_mt"], "cut_rpm": ctx.schedule.rpm} for q, (label, i) in enumerate(chosen)]
+
+
+def lobe_depths_mm(job) -> list:
+    """One lobe curve, (structure, cut, rpm, steps) -> critical depths in mm (None: never chatters)."""
+    dyn, cut, rpm, steps = job
+    return [r.depth_m * 1e3 if math.isfinite(r.depth_m) else None for r in critical_lobes(dyn, cut, rpm, steps)]

@@ -15,13 +15,15 @@ import json
 import logging
 import math
 import time
+import contextlib
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
 from posedyn.errors import InputError
 from posedyn.io.atomic import write_text_atomic
 from posedyn.table import PoseSet
-from service.sweep.chunk import compute_chunk
+from service.sweep.chunk import compute_chunk, representative_lobes
 from service.sweep.spec import RESULT_COLUMNS, SweepSpec, read_sweep_poses
 import hashlib
 
@@ -39,10 +41,14 @@ class SweepOutcome:
     manifest: dict
     poses: object  # the PoseSet swept
     grid_twin: str | None
+    lobes: list = dataclasses.field(default_factory=list)  # `representative_lobes` when asked for
 
 
-def run_sweep(spec: SweepSpec, out: Path, workers: int | None = None, scheduler: str | None = None, resume: bool = False, progress=None) -> SweepOutcome:
-    """Compute every pending chunk, then merge. `progress(done, total)` is called as chunks land."""
+def run_sweep(spec: SweepSpec, out: Path, workers: int | None = None, scheduler: str | None = None, resume: bool = False, progress=None,
+              lobe_speeds: int = 0) -> SweepOutcome:
+    """Compute every pending chunk, then merge. `progress(done, total)` is called as chunks land.
+    `lobe_speeds` > 0: also the report's `representative_lobes` at that many speeds, one curve a
+    task on the same cluster (not counted in `seconds`)."""
     start = time.perf_counter()
     poses, grid_twin = read_sweep_poses(spec.poses)
     chunks = [list(range(i, min(i + spec.chunk_size, len(poses)))) for i in range(0, len(poses), spec.chunk_size)]
@@ -63,15 +69,56 @@ def run_sweep(spec: SweepSpec, out: Path, workers: int | None = None, scheduler:
     if progress:
         progress(len(done), len(chunks))
     used_workers = 0
-    if pending:
-        used_workers = _compute(spec, poses, grid_twin, chunks, pending, chunk_dir, workers, scheduler, progress, len(done), len(chunks))
-    rows = []
-    for i in range(len(chunks)):
-        rows += _read_chunk(_chunk_path(chunk_dir, i))
-    columns = result_columns(rows)
-    write_text_atomic(out / "results.csv", rows_to_csv(rows, columns))
-    _write_parquet(out / "results.parquet", rows, columns)
-    return SweepOutcome(rows, columns, len(pending), len(done), time.perf_counter() - start, used_workers, manifest, poses, grid_twin)
+    with _dask(workers, scheduler) if pending or lobe_speeds > 0 else contextlib.nullcontext() as client:
+        if client is not None:
+            used_workers = _worker_count(client, workers)
+        if pending:
+            _compute(client, spec, poses, grid_twin, chunks, pending, chunk_dir, progress, len(done), len(chunks))
+        rows = []
+        for i in range(len(chunks)):
+            rows += _read_chunk(_chunk_path(chunk_dir, i))
+        columns = result_columns(rows)
+        write_text_atomic(out / "results.csv", rows_to_csv(rows, columns))
+        _write_parquet(out / "results.parquet", rows, columns)
+        seconds = time.perf_counter() - start
+        lobes = []
+        if lobe_speeds > 0:
+            lobes = representative_lobes(spec.to_json(), poses, rows, grid_twin, lobe_speeds, mapper=lambda fn, jobs: client.gather(client.map(fn, jobs, pure=False)))
+    return SweepOutcome(rows, columns, len(pending), len(done), seconds, used_workers, manifest, poses, grid_twin, lobes)
+
+
+@contextlib.contextmanager
+def _dask(workers: int | None, scheduler: str | None):
+    """A Dask client: of the scheduler at `scheduler`, or of a local cluster of `workers` (2)
+    single-threaded worker processes, closed on exit."""
+    from distributed import Client, LocalCluster  # heavy (about 1 s): only when there is work
+
+    import dask  # heavy: only when there is work
+
+    logging.getLogger("distributed").setLevel(logging.ERROR)
+    # Dask's default worker environment sets MALLOC_TRIM_THRESHOLD_=64 KiB, which also turns off
+    # glibc's dynamic mmap threshold: every large temporary array is then mmap'd and unmapped and
+    # the batched stability work runs 2.7x slower. Workers here keep their heap instead (mmap
+    # only above 256 MiB, trim above 1 GiB, one arena for the task thread and the event loop):
+    # 21 ms per pose in a worker against 26 ms with Dask's setting (17 ms in a plain process).
+    environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
+    environ.update(MALLOC_TRIM_THRESHOLD_=1 << 30, MALLOC_MMAP_THRESHOLD_=1 << 28, MALLOC_ARENA_MAX=1)
+    dask.config.set({"distributed.nanny.pre-spawn-environ": environ})
+    if scheduler:
+        client, cluster = Client(scheduler), None
+    else:
+        cluster = LocalCluster(n_workers=workers or 2, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR)
+        client = Client(cluster)
+    try:
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _worker_count(client, workers: int | None) -> int:
+    return len(client.scheduler_info().get("workers", {})) or (workers or 2)
 
 
 def _prepare(out: Path, manifest: dict, resume: bool) -> None:
@@ -93,42 +140,19 @@ def _prepare(out: Path, manifest: dict, resume: bool) -> None:
     write_text_atomic(path, json.dumps(manifest, indent=2) + "\n")
 
 
-def _compute(spec, poses, grid_twin, chunks, pending, chunk_dir, workers, scheduler, progress, done_count, total) -> int:
-    from distributed import Client, LocalCluster, as_completed  # heavy (about 1 s): only when chunks are computed
+def _compute(client, spec, poses, grid_twin, chunks, pending, chunk_dir, progress, done_count, total) -> None:
+    from distributed import as_completed  # heavy: only when chunks are computed
 
-    import dask  # heavy: only when chunks are computed
-
-    logging.getLogger("distributed").setLevel(logging.ERROR)
-    # Dask's default worker environment sets MALLOC_TRIM_THRESHOLD_=64 KiB, which also turns off
-    # glibc's dynamic mmap threshold: every large temporary array is then mmap'd and unmapped and
-    # the batched stability work runs 2.7x slower. Workers here keep their heap instead (mmap
-    # only above 256 MiB, trim above 1 GiB, one arena for the task thread and the event loop):
-    # 21 ms per pose in a worker against 26 ms with Dask's setting (17 ms in a plain process).
-    environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
-    environ.update(MALLOC_TRIM_THRESHOLD_=1 << 30, MALLOC_MMAP_THRESHOLD_=1 << 28, MALLOC_ARENA_MAX=1)
-    dask.config.set({"distributed.nanny.pre-spawn-environ": environ})
-    if scheduler:
-        client, cluster = Client(scheduler), None
-    else:
-        cluster = LocalCluster(n_workers=workers or 2, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR)
-        client = Client(cluster)
-    try:
-        count = len(client.scheduler_info().get("workers", {})) or (workers or 2)
-        spec_json = spec.to_json()
-        futures = {client.submit(_chunk_rows, spec_json, _subset(poses, chunks[i]), grid_twin, pure=False): i for i in pending}
-        finished = done_count
-        for future in as_completed(futures):
-            i = futures[future]
-            rows = future.result()
-            write_text_atomic(_chunk_path(chunk_dir, i), rows_to_csv(rows, result_columns(rows)))
-            finished += 1
-            if progress:
-                progress(finished, total)
-        return count
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+    spec_json = spec.to_json()
+    futures = {client.submit(_chunk_rows, spec_json, _subset(poses, chunks[i]), grid_twin, pure=False): i for i in pending}
+    finished = done_count
+    for future in as_completed(futures):
+        i = futures[future]
+        rows = future.result()
+        write_text_atomic(_chunk_path(chunk_dir, i), rows_to_csv(rows, result_columns(rows)))
+        finished += 1
+        if progress:
+            progress(finished, total)
 
 
 def _chunk_rows(spec_json: str, poses, grid_twin):
