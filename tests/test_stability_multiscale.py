@@ -14,7 +14,7 @@ import pytest
 
 import independent_milling_sim as sim
 from posedyn.dynamics import ToolTipDynamics
-from posedyn.stability import Cut, Discretization, StabilityModel, critical, critical_lobes, critical_points
+from posedyn.stability import Cut, Discretization, StabilityModel, critical, critical_lobes, critical_points, floquet
 from posedyn.table import Mode
 
 #: The demo sweep's model at pose x1700_y-100_z600_b40 (issue 17): direction, fn_hz, zeta, k_n_per_m.
@@ -174,3 +174,33 @@ def test_the_repaired_depth_splits_growth_from_decay_in_the_independent_simulati
     args = (R28_ROWS, R28_CUT.teeth, R28_CUT.kt_pa, R28_CUT.kn_pa, R28_CUT.radial_immersion, R28_CUT.milling, R28_RPM)
     assert not sim.grows(*args, 0.95 * result.depth_m)
     assert sim.grows(*args, 1.05 * result.depth_m)
+
+
+#: The demo model's median sweep pose with seed 004's MRF absorber at 63.5 Hz (3 kg, 477.7 kN/m,
+#: zeta 0.075) on both axes: mass-normalised host modes (fn_hz, zeta, x shape, y shape).
+ABSORBER_HOST = [
+    (11.474492095090735, 0.03003213403126595, 2.1326154908570464e-03, 0.0), (11.578093035026939, 0.02987413245115482, 0.0, 8.0944796273592259e-02),
+    (11.72983016206589, 0.03051779595066121, 4.6912061572980036e-02, 0.0), (11.722943010726402, 0.0278450688022522, 0.0, 9.5014415211204257e-03),
+    (1451.5758712644965, 0.06850897555725116, 1.5815467704611117, 0.0), (1479.5915233751423, 0.04823328684437599, 0.0, 1.1295162575349169),
+    (5438.870775203021, 0.01097557294101775, 6.3464832427151814, 0.0), (5419.008420264957, 0.01090405527274473, 0.0, 6.4910994166910143),
+]
+
+
+@pytest.mark.parametrize("rpm", [2384.6153846153848, 2743.5897435897436])
+def test_a_deep_cut_with_spindle_modes_as_stiff_as_the_cut_is_refined_until_they_are_resolved(rpm):
+    """At 37-43 mm (the absorber-coupled pose) the cut is as stiff as the 5.4 kHz spindle modes,
+    and a cutting sub-step of 8-16 per radian holds 1-3 of their periods: two such levels agreed
+    to 0.4 % at 2 % above the converged depth (2744 rpm; at 2385 rpm a 1.5 kHz branch was reported
+    2 % above the 6.3 kHz one), and at 2744 rpm the repair's Newton on one eigenvalue of two nearly
+    equal ones failed (no answer). The default result is within 1.5 % of the engine at 64 sub-steps
+    a radian (error estimate 1e-5 there) and on the same branch."""
+    from absorber.coupling import with_absorber
+
+    host = ToolTipDynamics(fn_hz=np.array([r[0] for r in ABSORBER_HOST]), zeta=np.array([r[1] for r in ABSORBER_HOST]),
+                           shapes=np.array([[r[2] for r in ABSORBER_HOST], [r[3] for r in ABSORBER_HOST]]))
+    dyn = with_absorber(host, 3.0, 477684.88790826, 0.07475337355756533)
+    result = critical_points([dyn], CUT, rpm)[0]
+    fine = floquet.critical_depth(dyn, CUT, rpm, substeps_per_rad=64.0)
+    assert result.converged and fine.converged and fine.rel_error_estimate < 1e-3
+    assert abs(result.depth_m / fine.depth_m - 1.0) < 0.015
+    assert abs(result.chatter_hz / fine.chatter_hz - 1.0) < 0.01
