@@ -97,7 +97,10 @@ The critical depth is the smallest converged boundary point. Its resolution is c
 given: the boundary point is found with `SUBSTEPS_PER_RAD` sub-steps per radian of cutting,
 re-solved (Newton from the coarse root) with twice as many, and the difference is the error
 estimate (the error decreases at least linearly in the sub-step length, so the difference bounds
-the error of the finer value); the resolution doubles until the estimate is below rel_tol / 2.
+the error of the finer value); the resolution doubles until the estimate is below rel_tol / 2
+and every mode at least 1 / SOFT_MODE as stiff as the cut is resolved (at most SUBSTEP_PERIODS
+of its periods in a cutting sub-step: before that the error is not yet monotone in the sub-step
+and two levels can agree by chance).
 
 Dominant chatter frequency: as `chatter.chatter_frequencies` defines it (Dombovari et al. 2011):
 the Floquet solution at the critical point is exp(i theta t / tau) p(t) with p tau-periodic;
