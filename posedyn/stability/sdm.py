@@ -35,7 +35,6 @@ dense eigensolver on the formed Psi.
 
 from __future__ import annotations
 
-
 from dataclasses import dataclass
 from functools import cached_property
 
