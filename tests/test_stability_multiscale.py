@@ -204,3 +204,19 @@ def test_a_deep_cut_with_spindle_modes_as_stiff_as_the_cut_is_refined_until_they
     assert result.converged and fine.converged and fine.rel_error_estimate < 1e-3
     assert abs(result.depth_m / fine.depth_m - 1.0) < 0.015
     assert abs(result.chatter_hz / fine.chatter_hz - 1.0) < 0.01
+
+
+def test_the_repair_bisection_treats_an_unresolved_count_as_not_stable():
+    """Heavily damped kHz modes at 13,500 rpm, 3 teeth, a/D 0.21 up milling: the coarse cut model
+    overflows above 0.1 m, where the winding count comes back unresolved with any number (-22 to
+    48); the bisection once took a negative one for 'stable' and repaired to a 114-151 mm
+    boundary point (flagged) instead of the 7.6 mm one. The default result is the 7.6 mm one,
+    within 1 % of the engine at 32 sub-steps a radian."""
+    rows = [("x", 26.718964985988855, 0.09796839235122749, 44340207.401215225), ("x", 704.6398438441488, 0.15476395174206403, 5242058.396038551),
+            ("x", 8098.6100247969225, 0.1806708724690384, 8668978.462594181), ("y", 10.435108177598082, 0.06966392397721237, 104488234.45936096),
+            ("y", 1623.6194374617799, 0.1620290578474757, 5894287.446652081), ("y", 5397.937326782716, 0.13504668116793686, 42494735.22100776)]
+    cut = Cut(teeth=3, kt_pa=1857943419.109274, kn_pa=660072185.3352492, radial_immersion=0.21053794576073193, milling="up")
+    result = critical_points([structure(rows)], cut, 13511.967513950087)[0]
+    fine = floquet.critical_depth(structure(rows), cut, 13511.967513950087, substeps_per_rad=32.0)
+    assert result.converged and fine.converged
+    assert abs(result.depth_m / fine.depth_m - 1.0) < 0.01 and 8400 < result.chatter_hz < 8800

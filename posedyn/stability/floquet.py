@@ -1809,11 +1809,19 @@ def _descend(char, tau, a_top):
 
 
 def _bisect_repair(char, tau, a_top):
+    trusted = True  # every count of the bisection resolved: its bracket can be trusted
+
+    def unstable(a):  # a count that is not resolved has not shown stability (its number can be anything)
+        nonlocal trusted
+        count, resolved, _ = unstable_count(char, a, tau)
+        trusted &= resolved
+        return count > 0 or not resolved
+
     lo, hi = 0.0, a_top if np.isfinite(a_top) else None
     if hi is None:
         a = 1e-4
         for _ in range(30):
-            if unstable_count(char, a, tau)[0] > 0:
+            if unstable(a):
                 hi = a
                 break
             lo, a = a, a * 2.0
@@ -1823,16 +1831,16 @@ def _bisect_repair(char, tau, a_top):
     hi *= VERIFY_FRACTION
     lo = None
     for fraction in BISECT_PROBES:  # a missed branch is often just below (a finer cut model's)
-        if unstable_count(char, fraction * hi, tau)[0] > 0:
+        if unstable(fraction * hi):
             hi = fraction * hi
         else:
             lo = fraction * hi
             break
     if lo is None:
-        lo = 0.0 if unstable_count(char, floor, tau)[0] > 0 else floor
+        lo = 0.0 if unstable(floor) else floor
     while hi - lo > 0.01 * hi:
         mid = 0.5 * (lo + hi) if lo == 0.0 else np.sqrt(lo * hi)
-        if unstable_count(char, mid, tau)[0] > 0:
+        if unstable(mid):
             hi = mid
         else:
             lo = mid
@@ -1843,11 +1851,11 @@ def _bisect_repair(char, tau, a_top):
     # count at 0.995 x the point verifies it)
     a_r, t_r = _newton_from_nearest(char, tau, hi, BISECT_POINTS, DESCENT_STARTS)
     fit = a_r <= hi * (1.0 + REPAIR_SLACK)
-    if not fit.any():  # e.g. two multipliers nearly equal (x and y spindle modes 0.3 % apart): on the determinant
+    if not fit.any() and trusted:  # e.g. two multipliers nearly equal (x and y spindle modes 0.3 % apart): on the determinant
         a_r, t_r = _newton_on_determinant(char, tau, hi, BISECT_POINTS, DESCENT_STARTS)
         fit = (a_r <= hi * (1.0 + REPAIR_SLACK)) & (a_r >= lo * (1.0 - REPAIR_SLACK))
-        if not fit.any():
-            return None
+    if not fit.any():
+        return None
     return float(a_r[fit][0]), float(t_r[fit][0])
 
 
