@@ -86,7 +86,14 @@ def _converged_or_flagged(point, frequencies: bool) -> StabilityResult:
     if point is None:
         return StabilityResult(math.nan, math.nan, "floquet", False, math.inf)  # unknown, not "never chatters"
     converged = bool(point.converged) and point.verified is not False  # a failed check is not a converged answer
-    return StabilityResult(point.depth_m, point.chatter_hz if frequencies else math.nan, "floquet", converged, float(point.rel_error_estimate), family=tuple(point.family))
+    return StabilityResult(point.depth_m, point.chatter_hz if frequencies else math.nan, "floquet", converged,
+                           _estimate(point.rel_error_estimate, point.verified), family=tuple(point.family))
+
+
+def _estimate(rel_error_estimate: float, verified) -> float:
+    """The error estimate a result reports: the resolution's, or inf where the multiplier count
+    found a lower branch it could not place (the estimate is then of another boundary point)."""
+    return math.inf if verified is False else float(rel_error_estimate)
 
 
 def _sdm_points(structures, cut, rpm, steps, frequencies) -> list[StabilityResult]:
@@ -144,6 +151,6 @@ def _can_fork() -> bool:
 def _lobe_points(dyn: ToolTipDynamics, cut: Cut, rpm: np.ndarray) -> list[StabilityResult]:
     lobes = floquet.lobes(dyn, cut, rpm, rel_tol=REL_TOL, verify=True)
     return [
-        StabilityResult(float(d), float(f), "floquet", bool(c and v), float(e))
+        StabilityResult(float(d), float(f), "floquet", bool(c and v), _estimate(e, bool(v)))
         for d, f, c, v, e in zip(lobes.depth_m, lobes.chatter_hz, lobes.converged, lobes.verified, lobes.rel_error_estimate)
     ]
