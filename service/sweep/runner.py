@@ -9,14 +9,14 @@ a directory that already holds chunks, so results never mix.
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import dataclasses
 import io
 import json
 import logging
 import math
 import time
-import contextlib
-import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
