@@ -328,15 +328,20 @@ class FloquetCharacteristic:
             self._free_eig = np.linalg.eig(self.A0.astype(complex))
         return self._free_eig
 
-    def frf(self, omega) -> np.ndarray:
-        """Tool-tip receptance (..., 2, 2) of the (turned) structure from the eigen-decomposition
-        of A0: G = S V diag(1 / (i w - lam)) V^-1 [0; Phi_R^T]."""
+    def residues(self):
+        """(lam, S V, V^-1 [0; Phi_R^T]) of the free structure (cached): the tool-tip receptance is
+        sum_k left[:, k] right[k, :] / (i w - lam_k)."""
         if getattr(self, "_frf_parts", None) is None:
             lam, V = self.free_eig()
             inp = np.zeros((2 * self.n, 2))
             inp[self.n :] = self.force_shapes.T
             self._frf_parts = (lam, self.S @ V, self.free_eig_inverse() @ inp)
-        lam, left, right = self._frf_parts
+        return self._frf_parts
+
+    def frf(self, omega) -> np.ndarray:
+        """Tool-tip receptance (..., 2, 2) of the (turned) structure from the eigen-decomposition
+        of A0: G = S V diag(1 / (i w - lam)) V^-1 [0; Phi_R^T]."""
+        lam, left, right = self.residues()
         w = np.asarray(omega, dtype=float)[..., None]
         return np.einsum("dk,...k,ke->...de", left, 1.0 / (1j * w - lam), right)
 
@@ -349,12 +354,10 @@ class FloquetCharacteristic:
         """Whether a free mode at least 1 / SOFT_MODE as stiff at the tool tip as the cut at depth
         a (m) vibrates more than SUBSTEP_PERIODS periods in this model's longest cutting sub-step
         (tooth period tau): its answer is not yet in the asymptotic range of the resolution."""
-        lam, _ = self.free_eig()
-        self.frf(np.zeros(1))  # the residues
-        _, left, right = self._frf_parts
-        residue = np.linalg.norm(left, axis=0) * np.linalg.norm(right, axis=1)
-        with np.errstate(all="ignore"):
-            soft = 2.0 * residue / np.abs(lam) * a * np.hypot(self.cut.kt_pa, self.cut.kn_pa) >= 1.0 / SOFT_MODE
+        lam, left, right = self.residues()
+        with np.errstate(all="ignore"):  # static tool-tip compliance of each eigen-pair, 2 |R_k| / |lam_k|
+            compliance = 2.0 * np.linalg.norm(left, axis=0) * np.linalg.norm(right, axis=1) / np.abs(lam)
+            soft = compliance * a * np.hypot(self.cut.kt_pa, self.cut.kn_pa) >= 1.0 / SOFT_MODE
         substep = tau * (self.fraction[self.cutting].max() if self.cutting.any() else 0.0)
         return bool(np.any(soft & (np.abs(lam.imag) / (2.0 * np.pi) * substep > SUBSTEP_PERIODS)))
 
@@ -873,9 +876,13 @@ def _newton_step(a, theta, Gc, g):
         step = -np.stack([gt.imag * g.real - gt.real * g.imag, ga.real * g.imag - ga.imag * g.real], 1) / det[:, None]
     bad = ~np.all(np.isfinite(step), axis=1)
     step[bad] = 0.0
-    limit = np.maximum(np.abs(step[:, 0]) / (0.3 * a), np.abs(step[:, 1]) / 0.5)
-    step /= np.maximum(limit, 1.0)[:, None]
+    step /= _step_excess(a, step[:, 0], step[:, 1])[:, None]
     return step, ga, gt, bad
+
+
+def _step_excess(a, da, dtheta):
+    """The divisor (>= 1) that limits a Newton step to 30 % in depth and 0.5 rad in theta."""
+    return np.maximum(np.maximum(np.abs(da) / (0.3 * a), np.abs(dtheta) / 0.5), 1.0)
 
 
 def _prune(a, theta, g, done, dead, group):
@@ -1883,9 +1890,9 @@ def _newton_on_determinant(char, tau, a, points: int, starts: int, iterations: i
             _, La, Lt, _ = char.log_char(a_r[act], t_r[act], np.full(len(act), tau))
             det = La.real * Lt.imag - Lt.real * La.imag
             da, dt = -Lt.imag / det, La.imag / det
-            scale = 1.0 / np.maximum(np.maximum(np.abs(da) / (0.3 * a_r[act]), np.abs(dt) / 0.5), 1.0)
-            a_r[act] += np.where(np.isfinite(da * scale), da * scale, np.nan)  # a singular step ends that start
-            t_r[act] += dt * scale
+            excess = _step_excess(a_r[act], da, dt)
+            a_r[act] += np.where(np.isfinite(da / excess), da / excess, np.nan)  # a singular step ends that start
+            t_r[act] += dt / excess
         done[act] = (np.abs(da) < tol * a_r[act]) & (np.abs(dt) < tol)
     ok = done & (a_r > 0)
     t = np.mod(t_r[ok], 2.0 * np.pi)
