@@ -396,10 +396,22 @@ class FloquetCharacteristic:
         free_idx = np.flatnonzero(~self.cutting)
         if len(free_idx):  # independent of c: once per distinct delay
             utau, inverse = np.unique(tau, return_inverse=True)
-            Af = self.A0[None, None] * (self.fraction[free_idx, None] * utau[None, :])[:, :, None, None]
-            Ef = sdm.expm_batched(Af.reshape(-1, n2, n2).astype(c.dtype)).reshape(len(free_idx), len(utau), n2, n2)
-            E[free_idx] = Ef[:, inverse.reshape(-1)]
+            E[free_idx] = self._free_flight(utau)[:, inverse.reshape(-1)]
         return E
+
+    def _free_flight(self, utau: np.ndarray) -> np.ndarray:
+        """exp(A0 dt_i) of the free-flight segments at the delays utau, (segments, len(utau), 2n,
+        2n), real; cached per delay (a structure is solved at a few delays many times over)."""
+        cache = self.__dict__.setdefault("_free_cache", {})
+        new = [t for t in utau.tolist() if t not in cache]
+        if new:
+            free_idx = np.flatnonzero(~self.cutting)
+            n2 = 2 * self.n
+            Af = self.A0[None, None] * (self.fraction[free_idx, None] * np.array(new)[None, :])[:, :, None, None]
+            Ef = sdm.expm_batched(Af.reshape(-1, n2, n2)).reshape(len(free_idx), len(new), n2, n2)
+            for k, t in enumerate(new):
+                cache[t] = Ef[:, k]
+        return np.stack([cache[t] for t in utau.tolist()], axis=1)
 
     def log_char(self, a, theta, tau, h: float = 1e-6):
         """ln F and its derivatives in a and theta at nu = exp(-i theta), c = a (1 - nu).
