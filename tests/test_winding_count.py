@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import independent_milling_sim as sim
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.stability import Cut, floquet, reference
 from posedyn.table import Mode
@@ -58,3 +59,33 @@ def test_the_interpolated_count_is_the_directly_sampled_one(monkeypatch):
     assert interpolated == direct
     assert [c for c, _ in interpolated][:2] == [0, 0] and all(c > 0 for c, _ in interpolated[2:])
     assert all(r for _, r in interpolated)
+
+
+#: A robot with four lightly damped modes at 4-112 Hz and a spindle to 8.6 kHz (a random case of
+#: the blind island search, 2026-12-03): direction, fn_hz, zeta, k_n_per_m.
+ROBOT_ROWS = [
+    ("x", 3.8012758934076913, 0.07702027193887312, 14148267.774466194), ("x", 79.56628167719816, 0.07525207027053424, 9951742.687501732),
+    ("x", 1829.6070580408639, 0.07386340410443817, 5388494.904582684), ("x", 3381.116660376485, 0.03449923262284177, 9571208.035941876),
+    ("y", 4.5392775553926725, 0.060391333420281634, 15646079.483703842), ("y", 112.06036658568266, 0.05043521772913321, 3412041.108889614),
+    ("y", 1835.6204255556706, 0.041335215841747625, 5587955.840883304), ("y", 8554.38235320967, 0.03936104457410703, 23737076.14876527),
+]
+ROBOT_CUT = Cut(teeth=6, kt_pa=1034231816.7058289, kn_pa=170304724.38159108, radial_immersion=0.5732450350099244, milling="up")
+
+
+def test_robot_modes_close_to_the_circle_do_not_alias_the_count():
+    """At 6962 rpm and 6 teeth the robot modes' free multipliers lie within 2.5e-3 of the unit
+    circle, several zeros of h inside the first step of the 64-point grid: their half turns of
+    phase added up to a whole one the step test could not see, and the count said 2 unstable
+    multipliers (resolved) at a twentieth of the critical depth, where the independent
+    simulation (tests/independent_milling_sim.py) decays. The count now always samples the free
+    multipliers' angles."""
+    dyn = ToolTipDynamics.from_modes(x=[Mode(f, z, k) for d, f, z, k in ROBOT_ROWS if d == "x"], y=[Mode(f, z, k) for d, f, z, k in ROBOT_ROWS if d == "y"])
+    rpm = 6961.76149699935
+    result = floquet.critical_depth(dyn, ROBOT_CUT, rpm)
+    tau = float(ROBOT_CUT.tooth_period_s(rpm))
+    char = floquet.FloquetCharacteristic(dyn, ROBOT_CUT, result.substeps_per_rad)
+    for fraction in (0.05, 0.5, 0.9):
+        assert floquet.unstable_count(char, fraction * result.depth_m, tau)[:2] == (0, True)
+    args = (ROBOT_ROWS, ROBOT_CUT.teeth, ROBOT_CUT.kt_pa, ROBOT_CUT.kn_pa, ROBOT_CUT.radial_immersion, ROBOT_CUT.milling, rpm)
+    assert not sim.grows(*args, 0.9 * result.depth_m)
+    assert sim.grows(*args, 1.05 * result.depth_m)
