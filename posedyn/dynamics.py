@@ -41,8 +41,12 @@ class ToolTipDynamics:
             raise InputError("at least one mode, with fn_hz, zeta and shapes of equal length", got=(len(fn), len(zeta), shapes.shape))
         if not (np.all(np.isfinite(fn)) and np.all(fn > 0)):
             raise InputError("natural frequencies > 0", got=fn.tolist(), column="fn_hz")
-        if not np.all((zeta > 0) & (zeta < 1)):
+        if self.coupling is None and not np.all((zeta > 0) & (zeta < 1)):
             raise InputError("damping ratios in (0, 1)", got=zeta.tolist(), column="zeta")
+        if self.coupling is not None and not np.all(np.isfinite(zeta) & (zeta > 0)):
+            # the diagonal of a coupled structure's damping may exceed critical: an absorber's
+            # damper across a light spindle mode (5 kg, 1000 N s/m on a 6 kHz mode of 2 g)
+            raise InputError("diagonal damping ratios > 0", got=zeta.tolist(), column="zeta")
         if not np.all(np.isfinite(shapes)) or (self.coupling is None and np.any(np.all(shapes == 0, axis=0))):
             raise InputError("finite mode shapes with a non-zero x or y component", column="shapes")
         for name, value in (("fn_hz", fn), ("zeta", zeta), ("shapes", shapes)):

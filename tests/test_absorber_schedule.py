@@ -34,6 +34,19 @@ def test_coupled_structure_reproduces_the_tmd_receptance():
     assert np.allclose(G, Tuning("tmd", mu, gamma, zeta_a).receptance(lam, zeta), rtol=1e-10)
 
 
+def test_an_absorber_damper_across_a_light_spindle_mode_is_a_valid_structure():
+    """5 kg at 40 Hz with zeta 0.2 (1005 N s/m) on a tool whose 6 kHz mode has 2.2 g of modal
+    mass: the damping matrix's diagonal is 1.4x critical for that mode, which the structure once
+    refused ('damping ratios in (0, 1)'). Its receptance is the direct solve of the matrices."""
+    host = ToolTipDynamics.from_modes(x=[Mode(12.0, 0.03, 3.0e5), Mode(6000.0, 0.02, 3.2e6)])
+    structure = with_absorber(host, 5.0, 5.0 * (2 * math.pi * 40.0) ** 2, 0.2, directions=("x",))
+    assert structure.zeta.max() > 1.0
+    K, C = structure.coupling
+    w = 2 * math.pi * np.array([10.0, 40.0, 6000.0])
+    direct = [structure.shapes[0] @ np.linalg.solve(K - x**2 * np.eye(3) + 1j * x * C, structure.shapes[0]) for x in w]
+    assert np.allclose(structure.frf(w)[:, 0, 0], direct, rtol=1e-10)
+
+
 @pytest.fixture(scope="module")
 def position5(datasets):
     table = read_modal_table(datasets / "seeds/hou2023_positions.csv")
