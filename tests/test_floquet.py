@@ -134,7 +134,7 @@ def test_no_boundary_point_found_is_unknown_not_never_chatters(monkeypatch):
     depth is NaN and not converged, never inf, which would read as "never chatters"."""
     from posedyn.stability import critical_points
 
-    monkeypatch.setattr(converged, "zoa_seeds", lambda *a, **k: (np.zeros(0), np.zeros(0), np.zeros(0, int)))
+    monkeypatch.setattr(converged, "zoa_seeds_batch", lambda dyn, cut, taus, char=None: [(np.zeros(0), np.zeros(0), np.zeros(0, int))] * len(taus))
     monkeypatch.setattr(converged, "_repair", lambda *a, **k: None)
     result = critical_points([ONE_DOF], CUT, 9000.0)[0]
     assert math.isnan(result.depth_m) and result.converged is False

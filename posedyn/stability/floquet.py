@@ -555,19 +555,27 @@ def _eig2(A: np.ndarray) -> np.ndarray:
 
 
 def zoa_seeds(dyn: ToolTipDynamics, cut: Cut, tau: float, char: FloquetCharacteristic | None = None):
-    """(depth, theta in [0, 2 pi), mode index) of the zeroth-order boundary points at delay tau: sign changes
-    of Im a(w) with Re a > 0, a(w) = -1 / ((1 - exp(-i w tau)) Lambda(G(i w) H0)), on a grid
-    around each mode (BAND_ZETAS zeta w each side, POINTS_PER_TOOTH_FREQUENCY points per w_T).
-    With `char` (a characteristic of `dyn`) G comes from its free eigen-decomposition
-    (O(n) per frequency instead of a solve for coupled structures)."""
-    turned = dyn.rotated(np.deg2rad(cut.feed_angle_deg))
-    if char is not None:
-        frf = char.frf
-    else:
-        frf = turned.frf
+    """(depth, theta in [0, 2 pi), mode index) of the zeroth-order boundary points at delay tau
+    (`zoa_seeds_batch` at one delay)."""
+    return zoa_seeds_batch(dyn, cut, np.array([tau], dtype=float), char)[0]
+
+
+#: Most grid points x delays `zoa_seeds_batch` evaluates at once (memory).
+ZOA_BATCH_POINTS = 1 << 20
+
+
+def zoa_seeds_batch(dyn: ToolTipDynamics, cut: Cut, taus: np.ndarray, char: FloquetCharacteristic | None = None) -> list:
+    """Per delay tau: (depth, theta in [0, 2 pi), mode index) of the zeroth-order boundary points:
+    sign changes of Im a(w) with Re a > 0, a(w) = -1 / ((1 - exp(-i w tau)) Lambda(G(i w) H0)),
+    on a grid around each mode (BAND_ZETAS zeta w each side, POINTS_PER_TOOTH_FREQUENCY points per
+    w_T of the fastest delay, at most zeta w / 10 apart). The receptance and its eigenvalues are
+    evaluated once for all delays. With `char` (a characteristic of `dyn`) G comes from its free
+    eigen-decomposition (O(n) per frequency instead of a solve for coupled structures)."""
+    taus = np.asarray(taus, dtype=float).reshape(-1)
+    frf = char.frf if char is not None else dyn.rotated(np.deg2rad(cut.feed_angle_deg)).frf
     H0 = mean_force_matrix(cut)
-    wT = 2.0 * np.pi / tau
-    depths, thetas, modes = [], [], []
+    wT = 2.0 * np.pi / taus.max()
+    found = [[] for _ in taus]  # per delay: (depths, thetas, modes) arrays, mode by mode
     for r, (w, z) in enumerate(zip(dyn.wn_rad_s, dyn.zeta)):
         half = max(BAND_ZETAS * z, 0.02) * w
         spacing = min(z * w / 10.0, wT / POINTS_PER_TOOTH_FREQUENCY)
@@ -575,23 +583,26 @@ def zoa_seeds(dyn: ToolTipDynamics, cut: Cut, tau: float, char: FloquetCharacter
         grid = np.linspace(max(w - half, 1e-3 * w), w + half, count)
         lam = _eig2(frf(grid) @ H0)  # (k, 2)
         lam[np.abs(lam) <= 1e-9 * np.abs(lam).max()] = 0.0  # round-off of a zero eigenvalue is no branch
-        with np.errstate(all="ignore"):
-            a = -1.0 / ((1.0 - np.exp(-1j * grid * tau))[:, None] * lam)
-        for b in range(2):
-            im, re = a[:-1, b].imag, a[:-1, b].real
-            im2, re2 = a[1:, b].imag, a[1:, b].real
-            change = np.flatnonzero((np.sign(im) != np.sign(im2)) & (re > 0) & (re2 > 0) & np.isfinite(im) & np.isfinite(im2))
-            for j in change:
-                t = im[j] / (im[j] - im2[j])
-                d = re[j] + t * (re2[j] - re[j])
+        step = max(1, ZOA_BATCH_POINTS // count)
+        for lo in range(0, len(taus), step):
+            tau = taus[lo : lo + step]
+            with np.errstate(all="ignore"):
+                a = -1.0 / ((1.0 - np.exp(-1j * grid[None, :] * tau[:, None]))[:, :, None] * lam[None])  # (delays, k, 2)
+            a = np.swapaxes(a, 1, 2)  # (delays, branch, k): crossings in the order branch, frequency
+            im, re = a[..., :-1].imag, a[..., :-1].real
+            im2, re2 = a[..., 1:].imag, a[..., 1:].real
+            with np.errstate(all="ignore"):
+                change = (np.sign(im) != np.sign(im2)) & (re > 0) & (re2 > 0) & np.isfinite(im) & np.isfinite(im2)
                 # a jump of Im a through infinity (1 - exp(-i w tau) -> 0) is not a crossing
-                if abs(a[j + 1, b] - a[j, b]) > 0.5 * max(abs(a[j, b]), abs(a[j + 1, b])):
-                    continue
-                wc = grid[j] + t * (grid[j + 1] - grid[j])
-                depths.append(d)
-                thetas.append(np.mod(wc * tau, 2.0 * np.pi))
-                modes.append(r)
-    return np.array(depths), np.array(thetas), np.array(modes, dtype=int)
+                change &= ~(np.abs(a[..., 1:] - a[..., :-1]) > 0.5 * np.maximum(np.abs(a[..., :-1]), np.abs(a[..., 1:])))
+            e, b, j = np.nonzero(change)
+            t = im[e, b, j] / (im[e, b, j] - im2[e, b, j])
+            depth = re[e, b, j] + t * (re2[e, b, j] - re[e, b, j])
+            theta = np.mod((grid[j] + t * (grid[j + 1] - grid[j])) * tau[e], 2.0 * np.pi)
+            for q in np.unique(e):
+                sel = e == q
+                found[lo + q].append((depth[sel], theta[sel], np.full(int(sel.sum()), r, dtype=int)))
+    return [tuple(np.concatenate([f[k] for f in parts]) if parts else np.zeros(0, dtype=int if k == 2 else float) for k in range(3)) for parts in found]
 
 
 #: Period-doubling seeds: the flip condition (a real multiplier at -1, theta = pi, c = 2 a real)
@@ -1344,6 +1355,11 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
     # 1. zeroth-order seeds: per mode band the lowest few, overall the lowest MAX_SEEDS
     seed_job, seed_a, seed_t, seed_m, seed_g, seed_v = [], [], [], [], [], []
     hinted = np.zeros(len(jobs), bool)
+    zoa = {}  # job -> its zeroth-order seeds, batched over each structure's delays
+    for s in range(len(dyns)):
+        mine = [j for j in range(len(jobs)) if jobs[j][0] == s and not (hints is not None and hints[j])]
+        if mine:
+            zoa.update(zip(mine, zoa_seeds_batch(smalls[s], cut, tau_all[[jobs[j][1] for j in mine]], char(s, 0))))
     for j, (s, e) in enumerate(jobs):
         if hints is not None and hints[j]:
             hinted[j] = True
@@ -1357,7 +1373,7 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
                     seed_g.append(complex(g_))
                     seed_v.append(v_ if v_ is not None and len(v_) == 2 * smalls[s].n_modes else None)
             continue
-        d, t, mode = zoa_seeds(smalls[s], cut, tau_all[e], char(s, 0))
+        d, t, mode = zoa[j]
         pick = set(np.argsort(d)[:MAX_SEEDS].tolist())
         for m in np.unique(mode):
             idx = np.flatnonzero(mode == m)
