@@ -25,9 +25,11 @@ import pytest
 import scipy.integrate
 import scipy.linalg
 
+from absorber.coupling import with_absorber
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.stability import Cut, floquet
 from posedyn.stability.cutting import force_matrix
+from posedyn.table import Mode
 
 DOC = json.loads((Path(__file__).parent / "data" / "hopf_island_pose.json").read_text())
 STRUCTURE = ToolTipDynamics(np.array(DOC["fn_hz"]), np.array(DOC["zeta"]), np.array(DOC["shapes"]),
@@ -36,51 +38,74 @@ CUT = Cut(**DOC["cut"])
 RPM = DOC["rpm"]
 TAU = float(CUT.tooth_period_s(RPM))
 
+#: A random robot-plus-spindle structure with an absorber (blind island search, 2026-12-03):
+#: host rows (direction, fn_hz, zeta, k_n_per_m), absorber (kg, N/m, zeta), cut, rpm.
+RANDOM_HOST = [
+    ("x", 12.442679591415466, 0.03620277682177345, 505941.219817937), ("x", 53.069614500255554, 0.009576978786108432, 8846879.601643812),
+    ("x", 1122.7446622737098, 0.07211448141921101, 6681848.696870184), ("x", 8890.612025233964, 0.059534913630756366, 16344599.261869505),
+    ("y", 27.7955228196534, 0.06324662033777198, 12576857.958449354), ("y", 106.42579881956344, 0.06123234959591703, 653622.806893307),
+    ("y", 2031.267694897134, 0.023955498905746758, 12521562.250690142), ("y", 4592.8850790641145, 0.04908931849475501, 13858607.324305397),
+]
+RANDOM_ABSORBER = (4.0674382465050085, 800981.0564214671, 0.057960419156117424)
+RANDOM_CUT = Cut(teeth=5, kt_pa=619571634.7892177, kn_pa=114744593.6302568, radial_immersion=0.6451622969930663, milling="down")
+RANDOM_RPM = 10359.715885937554
 
-def exact_log(depth_m: float, theta: float) -> complex:
+
+def exact_log(dyn: ToolTipDynamics, cut: Cut, rpm: float, depth_m: float, theta: float) -> complex:
     """ln(nu mu) for the multiplier mu of the period map nearest 1 / nu (nu = exp(-i theta)):
-    q'' + C q' + K q = c W(t) q with c = -a (1 - nu), integrated by DOP853 (rtol 1e-10) through
-    the cut and scipy's expm through free flight."""
-    dyn = STRUCTURE
+    q'' + C q' + K q = c W(t) q with c = -a (1 - nu), integrated by DOP853 (rtol 1e-10) over one
+    tooth period, piece by piece between the teeth's entries and exits (several teeth may cut at
+    once), and by scipy's expm where none cuts."""
     n = dyn.n_modes
     K, C = dyn.stiffness_matrix, dyn.damping_matrix
     nu = np.exp(-1j * theta)
     c = depth_m * (1.0 - nu)
-    omega = 2.0 * math.pi * RPM / 60.0
-    st, ex = CUT.engagement_rad
+    omega = 2.0 * math.pi * rpm / 60.0
+    tau = float(cut.tooth_period_s(rpm))
+    st, ex = cut.engagement_rad
 
     def generator(t):
-        W = dyn.force_shapes.T @ force_matrix(CUT, np.array(omega * t)) @ dyn.shapes
+        W = dyn.force_shapes.T @ force_matrix(cut, np.array(omega * t)) @ dyn.shapes
         A = np.zeros((2 * n, 2 * n), complex)
         A[:n, n:] = np.eye(n)
         A[n:, :n] = -K - c * W
         A[n:, n:] = -C
         return A
 
-    t_in, t_out = st / omega, ex / omega
-    flow = scipy.integrate.solve_ivp(lambda t, y: (generator(t) @ y.reshape(2 * n, 2 * n)).ravel(), (t_in, t_out),
-                                     np.eye(2 * n, dtype=complex).ravel(), method="DOP853", rtol=1e-10, atol=1e-12).y[:, -1].reshape(2 * n, 2 * n)
-    free = generator(0.5 * (t_out + TAU + t_in))
-    assert not np.any(free[n:, :n] + K)
-    mu = np.linalg.eigvals(scipy.linalg.expm(free * (TAU - (t_out - t_in))) @ flow)
+    # one tooth period from tooth 0's entry, in pieces between every tooth's entry and exit:
+    # DOP853 where a tooth cuts, scipy's expm where none does
+    t_in = st / omega
+    edges = np.mod(np.array([[st, ex]]) - 2.0 * np.pi * np.arange(cut.teeth)[:, None] / cut.teeth - st, 2.0 * np.pi) / omega
+    times = np.unique(np.concatenate([[0.0, tau], edges[(edges > 0) & (edges < tau)]])) + t_in
+    period = np.eye(2 * n, dtype=complex)
+    for t0, t1 in zip(times[:-1], times[1:]):
+        A_mid = generator(0.5 * (t0 + t1))
+        if not np.any(A_mid[n:, :n] + K):  # free flight
+            period = scipy.linalg.expm(A_mid * (t1 - t0)) @ period
+            continue
+        flow = scipy.integrate.solve_ivp(lambda t, y: (generator(t) @ y.reshape(2 * n, 2 * n)).ravel(), (t0, t1),
+                                         np.eye(2 * n, dtype=complex).ravel(), method="DOP853", rtol=1e-10, atol=1e-12)
+        period = flow.y[:, -1].reshape(2 * n, 2 * n) @ period
+    mu = np.linalg.eigvals(period)
     return complex(np.log(nu * mu[np.argmin(np.abs(mu - 1.0 / nu))]))
 
 
-def exact_boundary_point(depth_m: float, theta: float, iterations: int = 4):
+def exact_boundary_point(dyn, cut, rpm, depth_m: float, theta: float, iterations: int = 4):
     """Newton on (Re, Im) ln(nu mu) = 0 in (depth, theta), Jacobian by forward differences."""
+    g_of = lambda x: exact_log(dyn, cut, rpm, *x)  # noqa: E731
     x = np.array([depth_m, theta])
     for _ in range(iterations):
-        g = exact_log(*x)
-        ga, gt = (exact_log(x[0] * (1 + 1e-6), x[1]) - g) / (x[0] * 1e-6), (exact_log(x[0], x[1] + 1e-6) - g) / 1e-6
+        g = g_of(x)
+        ga, gt = (g_of([x[0] * (1 + 1e-6), x[1]]) - g) / (x[0] * 1e-6), (g_of([x[0], x[1] + 1e-6]) - g) / 1e-6
         J = np.array([[ga.real, gt.real], [ga.imag, gt.imag]])
         x = x - np.linalg.solve(J, [g.real, g.imag])
-    return x, abs(exact_log(*x))
+    return x, abs(g_of(x))
 
 
 def test_the_reported_depth_is_the_bottom_of_the_hopf_island():
     r = floquet.critical_depth(STRUCTURE, CUT, RPM)
     assert r.verified and r.converged
-    (depth, theta), residual = exact_boundary_point(r.depth_m, r.theta_rad)
+    (depth, theta), residual = exact_boundary_point(STRUCTURE, CUT, RPM, r.depth_m, r.theta_rad)
     assert residual < 1e-8
     # the exact model loses stability there (a boundary point bounds the critical depth from
     # above: the 6.04 mm once reported is 50 % too deep), and the engine is within its tolerance
@@ -102,3 +127,17 @@ def test_the_count_above_the_island_cannot_see_it():
     assert floquet.unstable_count(char, 0.995 * 6.04e-3, TAU)[:2] == (0, True)  # stable again
     assert floquet.unstable_count(char, 4.1e-3, TAU)[:2] == (2, True)  # inside: a complex pair
     assert floquet.unstable_count(char, 4.5e-3, TAU)[:2] == (0, True)  # above it
+
+
+def test_hills_seeds_lead_to_an_island_the_zeroth_order_misses():
+    """A random absorber-coupled structure at 10,360 rpm (5 teeth, a/D 0.65): unstable from 4.40
+    mm in an island, stable again, unstable from 10.40 mm. The zeroth-order and flip seeds led
+    only to the 10.40 mm branch, reported verified; Hill's boundary points (two harmonics) are
+    now seeds of every coupled structure. The island's bottom is a boundary point of the DOP853
+    characteristic."""
+    host = ToolTipDynamics.from_modes(x=[Mode(f, z, k) for d, f, z, k in RANDOM_HOST if d == "x"], y=[Mode(f, z, k) for d, f, z, k in RANDOM_HOST if d == "y"])
+    dyn = with_absorber(host, *RANDOM_ABSORBER)
+    r = floquet.critical_depth(dyn, RANDOM_CUT, RANDOM_RPM)
+    assert r.verified and r.converged and r.depth_m < 5e-3
+    (depth, theta), residual = exact_boundary_point(dyn, RANDOM_CUT, RANDOM_RPM, r.depth_m, r.theta_rad)
+    assert residual < 1e-8 and abs(r.depth_m / depth - 1.0) < 0.02

@@ -89,8 +89,10 @@ where one is found the job is solved again from the seeds at that resolution, an
 seeds cannot bring below the island is marked not verified. Hopf islands (complex multipliers)
 are not scanned for: they are found only where a seed leads to their lowest point (a band seed
 whose Newton fails below the job's lowest point is tried again on the whole structure: the band
-projection lost one, tests/test_hopf_islands.py), and any converged boundary point bounds the
-answer from above (a re-solve never trades one for a higher point).
+projection lost one; a coupled structure also gets HILL_SEEDS of Hill's boundary points; both in
+tests/test_hopf_islands.py), and any converged boundary point bounds the answer from above (a
+re-solve never trades one for a higher point). A blind search over about 1200 random
+absorber-coupled structures still finds 3 verified answers above an island (README).
 
 Continuation (`critical_depths(continuation=True)`): structures with similar modes (`modal_path`)
 start Newton on the whole structure from the boundary points the neighbours either side converged
@@ -603,6 +605,12 @@ def zoa_seeds_batch(dyn: ToolTipDynamics, cut: Cut, taus: np.ndarray, char: Floq
                 sel = e == q
                 found[lo + q].append((depth[sel], theta[sel], np.full(int(sel.sum()), r, dtype=int)))
     return [tuple(np.concatenate([f[k] for f in parts]) if parts else np.zeros(0, dtype=int if k == 2 else float) for k in range(3)) for parts in found]
+
+
+#: Hill's lowest boundary points (`hill`) added to the seeds of a coupled structure (an absorber):
+#: the zeroth order misses branches an interrupted cut puts between the host's and the absorber's
+#: modes, among them Hopf islands that no count above them sees.
+HILL_SEEDS = 4
 
 
 #: Period-doubling seeds: the flip condition (a real multiplier at -1, theta = pi, c = 2 a real)
@@ -1385,6 +1393,15 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
         seed_m += list(mode[pick])
         seed_g += [np.nan] * len(pick)
         seed_v += [None] * len(pick)
+        if HILL_SEEDS and dyns[s].coupling is not None:  # Hill's boundary points (whole structure)
+            a_h, t_h = hill.hill_seeds(char(s, 0).frf, char(s, 0).free_eig()[0], cut, tau_all[e])
+            a_h, t_h = a_h[:HILL_SEEDS], t_h[:HILL_SEEDS]
+            seed_job += [j] * len(a_h)
+            seed_a += list(a_h)
+            seed_t += list(t_h)
+            seed_m += [-1] * len(a_h)
+            seed_g += [np.nan] * len(a_h)
+            seed_v += [None] * len(a_h)
     seed_scans: dict = {}  # job -> its flip-seed scan (on char(s, seed_level)), reused by the island check
     if FLIP_POINTS:  # period-doubling seeds, which the zeroth order never gives (mode -1: the whole structure)
         lowest = {}
