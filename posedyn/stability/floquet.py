@@ -91,8 +91,8 @@ are not scanned for: they are found only where a seed leads to their lowest poin
 whose Newton fails below the job's lowest point is tried again on the whole structure: the band
 projection lost one; a coupled structure also gets HILL_SEEDS of Hill's boundary points; both in
 tests/test_hopf_islands.py), and any converged boundary point bounds the answer from above (a
-re-solve never trades one for a higher point). A blind search over about 1200 random
-absorber-coupled structures still finds 3 verified answers above an island (README).
+re-solve never trades one for a higher point). A blind search over 1503 random
+robot-plus-spindle structures still found 2 verified answers above an island (README).
 
 Continuation (`critical_depths(continuation=True)`): structures with similar modes (`modal_path`)
 start Newton on the whole structure from the boundary points the neighbours either side converged
@@ -570,7 +570,7 @@ def zoa_seeds_batch(dyn: ToolTipDynamics, cut: Cut, taus: np.ndarray, char: Floq
     """Per delay tau: (depth, theta in [0, 2 pi), mode index) of the zeroth-order boundary points:
     sign changes of Im a(w) with Re a > 0, a(w) = -1 / ((1 - exp(-i w tau)) Lambda(G(i w) H0)),
     on a grid around each mode (BAND_ZETAS zeta w each side, POINTS_PER_TOOTH_FREQUENCY points per
-    w_T of the fastest delay, at most zeta w / 10 apart). The receptance and its eigenvalues are
+    w_T of the longest delay, at most zeta w / 10 apart). The receptance and its eigenvalues are
     evaluated once for all delays. With `char` (a characteristic of `dyn`) G comes from its free
     eigen-decomposition (O(n) per frequency instead of a solve for coupled structures)."""
     taus = np.asarray(taus, dtype=float).reshape(-1)
@@ -1483,11 +1483,11 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
     lowest_ok = {}
     for i in np.flatnonzero(ok0):
         lowest_ok[seed_job[i]] = min(lowest_ok.get(seed_job[i], np.inf), a0[i])
-    again = np.array([i for i in range(len(seed_a)) if not ok0[i] and isinstance(search[seed_key[i]], ProjectedCharacteristic)
-                      and seed_a[i] < lowest_ok.get(seed_job[i], np.inf)], int)
-    size = np.array([char(owners[i], seed_level).n for i in again], int)
+    lost = np.array([i for i in range(len(seed_a)) if not ok0[i] and isinstance(search[seed_key[i]], ProjectedCharacteristic)
+                     and seed_a[i] < lowest_ok.get(seed_job[i], np.inf)], int)
+    size = np.array([char(owners[i], seed_level).n for i in lost], int)
     for sz in np.unique(size):
-        sel = again[size == sz]
+        sel = lost[size == sz]
         batch = _Batch([char(s_, seed_level) if s_ in set(owners[sel].tolist()) else None for s_ in range(int(owners.max()) + 1)], owners[sel])
         a_, t_, ok_, gc_, vec_ = _newton(batch, seed_a[sel], seed_t[sel], seed_tau[sel], tol=REFINE_TOL, mode=seed_m[sel], group=seed_job[sel])
         for q, i in enumerate(sel):
