@@ -789,7 +789,8 @@ def _critical_log(char, a, theta, tau, target=None, idx=None, mode=None, vec=Non
     if idx is not None and hasattr(char, "take"):
         char = char.take(idx)
     nu = np.exp(-1j * theta)
-    M = char.monodromy(a * (1.0 - nu), tau)
+    with np.errstate(over="ignore", invalid="ignore"):  # a wild step's overflow dies below (NaN)
+        M = char.monodromy(a * (1.0 - nu), tau)
     rows = np.arange(len(a))
     out_g = np.empty(len(a), dtype=complex)
     out_v = np.empty((len(a), M.shape[-1]), dtype=complex)
