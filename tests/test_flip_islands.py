@@ -21,10 +21,12 @@ import pytest
 import scipy.integrate
 import scipy.linalg
 
+import independent_milling_sim as sim
 from absorber.coupling import with_absorber
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.stability import Cut, floquet
 from posedyn.stability.cutting import force_matrix
+from posedyn.table import Mode
 
 BARE = ToolTipDynamics(
     np.array([13.349513937132706, 16.10584527590849, 18.39279996082013, 48.643461493152095, 67.65722018951783, 98.78340076507274, 1443.5, 5434.3, 1480.0, 5418.8]),
@@ -100,6 +102,52 @@ def test_the_island_check_from_the_seed_scan_finds_the_island_below_an_answer(de
     tau = float(CUT.tooth_period_s(RPM))
     _, scans = floquet.flip_seeds(char, [scale * depth_m], [tau], [0])
     _, _, covered = floquet._islands_from_seed_scan(char, scans, [0], [depth_m], [tau])
-    island, _ = floquet._coarse_islands(char, char, scans, [0], np.array([depth_m]), np.array([tau]), [0])
+    island, _, _ = floquet._coarse_islands(char, char, scans, [0], np.array([depth_m]), np.array([tau]), [0])
     assert covered[0]
     assert island[0] == (depth_m > 3e-3) == floquet.flip_islands(char, [depth_m], [tau])[0][0]
+
+
+#: A random uncoupled robot-plus-spindle structure (blind island search of 2026-12-03): rows
+#: (direction, fn_hz, zeta, k_n_per_m); 4 teeth in up milling at a/D 0.91 (overlapping teeth),
+#: 12,667 rpm. At the coarse cut model a real multiplier passes -1 at 0.508 mm and comes back at
+#: 0.530 mm, under a Hopf branch near theta = pi at 0.544 mm, which the engine reported verified
+#: (the 13-point island scan, 1.21 apart, stepped over the island).
+NARROW_ROWS = [
+    ("x", 8.72310526980056, 0.024134557825149488, 848602.8121639595), ("x", 41.58559241743729, 0.009281454663474197, 12128040.88351615),
+    ("x", 1447.3393889787512, 0.05299194246972928, 11323997.468931561), ("x", 6070.497380731933, 0.05170720213855041, 13194812.261337144),
+    ("y", 19.73161356271489, 0.015898965611073894, 3227946.477643925), ("y", 105.43461241965382, 0.062059047320902595, 7313446.752968607),
+    ("y", 1163.6903952114458, 0.06621951266898629, 28519689.992760517), ("y", 3699.599491085007, 0.00801376839955356, 4859764.649600249),
+]
+NARROW = ToolTipDynamics.from_modes(x=[Mode(f, z, k) for d, f, z, k in NARROW_ROWS if d == "x"], y=[Mode(f, z, k) for d, f, z, k in NARROW_ROWS if d == "y"])
+NARROW_CUT = Cut(teeth=4, kt_pa=1957699435.8537712, kn_pa=305965113.8356096, radial_immersion=0.9094603940645208, milling="up")
+NARROW_RPM = 12667.025157470403
+
+
+def test_the_count_interpolant_ladder_finds_an_island_the_sparse_scan_steps_over():
+    """The level-0 winding count's interpolant of M(a0 (1 - nu)) holds on the whole disk, so nu =
+    1 - 2 a / a0 gives the flip condition at every depth below a0 (`ladder_islands`), here 2 %
+    apart instead of the scan's 21 %."""
+    char = floquet.FloquetCharacteristic(NARROW, NARROW_CUT, floquet.SUBSTEPS_PER_RAD)
+    tau = float(NARROW_CUT.tooth_period_s(NARROW_RPM))
+    answer = 0.544e-3
+    poly: list = []
+    count, resolved, _ = floquet.unstable_count(char, floquet.VERIFY_FRACTION * answer, tau, polynomial=poly)
+    assert count == 0 and resolved and poly  # stable again above the island
+    assert not floquet.flip_islands(char, [answer], [tau])[0][0]  # the sparse scan: nothing
+    island, _, inside = floquet.ladder_islands(char, floquet.VERIFY_FRACTION * answer, *poly[0], answer, tau)
+    assert island and 0.50e-3 < inside < 0.515e-3  # the bracket of its lower flip point
+    # the island on the monodromy itself (not the interpolant): det(I + M(2 a)) < 0 inside it
+    M = char.monodromy(2.0 * np.array([0.52e-3, 0.5e-3, 0.535e-3]), np.full(3, tau)).real
+    assert list(np.sign(np.linalg.det(np.eye(M.shape[-1]) + M))) == [-1.0, 1.0, 1.0]
+
+
+def test_the_answer_under_a_narrow_island_is_its_bottom_by_an_independent_simulation():
+    """Reported once as 0.544 mm, verified; the independent time-domain simulation
+    (tests/independent_milling_sim.py) grows at 0.95 x that. Now the island's bottom, a flip
+    point: decays 5 % below it and grows 5 % above."""
+    r = floquet.critical_depth(NARROW, NARROW_CUT, NARROW_RPM, verify=True)
+    assert r.verified and r.converged
+    assert r.theta_rad == pytest.approx(np.pi)
+    args = (NARROW_ROWS, NARROW_CUT.teeth, NARROW_CUT.kt_pa, NARROW_CUT.kn_pa, NARROW_CUT.radial_immersion, NARROW_CUT.milling, NARROW_RPM)
+    assert not sim.grows(*args, 0.95 * r.depth_m)
+    assert sim.grows(*args, 1.05 * r.depth_m)

@@ -80,13 +80,15 @@ Flip islands. The count at one depth says nothing about depths below it where th
 is not an interval from some depth upwards: a real multiplier can pass -1 and come back (a
 period-doubling island), and a search that misses the lower flip point reports the depth above
 the island with a count of 0 (the sweep's absorber poses: 5.5-9.2 mm reported where the cut
-chatters from 1.7-2.2 mm). `flip_islands` scans the real multipliers of M(2 a) (nu = -1) below
-every verified answer, first on the coarse cut model (for a job solved from the seeds, the flip
-seeds' own scan of that model is reused, `_coarse_islands`: 21 % of the exponential work of a
-single speed, 14 % of a 300-speed lobe diagram), then, where a multiplier is below -1 or
-within FLIP_NEAR of it, at the answer's own resolution (islands appear with a finer cut model);
-where one is found the job is solved again from the seeds at that resolution, and an answer the
-seeds cannot bring below the island is marked not verified. Hopf islands (complex multipliers)
+chatters from 1.7-2.2 mm). Below every verified answer the flip condition is checked first on
+the coarse cut model: on the level-0 winding count's interpolant, which holds on the whole disk
+and so gives M(2 a) at every depth below the count's without an exponential (`ladder_islands`,
+depths 2 % apart: the sign of det(I + M(2 a))), else on the flip seeds' own scan of that model
+(`_islands_from_seed_scan`) or a scan (`flip_islands`); then, where a multiplier is below -1 or
+within FLIP_NEAR of it, at the answer's own resolution (islands appear with a finer cut model;
+around the coarse model's island at the ladder's spacing, `dense_flip`). Where one is found
+the job is solved again at that resolution, from the seeds and the island's lower end, and an
+answer that cannot be brought below the island is marked not verified. Hopf islands (complex multipliers)
 are not scanned for: they are found only where a seed leads to their lowest point (a band seed
 whose Newton fails below the job's lowest point is tried again on the whole structure: the band
 projection lost one; a coupled structure also gets HILL_SEEDS of Hill's boundary points; both in
@@ -737,21 +739,103 @@ def _islands_from_seed_scan(char, scans: dict, jobs, depth, tau):
     return island, near, covered
 
 
-def _coarse_islands(full, seed_char, seed_scans: dict, jobs, depth, tau, levels):
-    """(island, near) of the island check on the coarse cut model for jobs with answers at
-    `depth` (refinement `levels`): from the flip-seed scan where it covers the range
-    (`_islands_from_seed_scan`; `seed_char` is the coarse model, possibly without the irrelevant
-    modes), else a scan of the whole structure (`full`). Where the seed scan sees an island or a
-    multiplier within FLIP_NEAR of -1 for a level-0 answer, a refined scan of the whole
-    structure decides (the seed scan samples other depths: a narrow island can fall between its
-    points and not between the refined scan's)."""
-    hit, near, covered = _islands_from_seed_scan(seed_char, seed_scans, jobs, depth, tau)
+def _coarse_islands(full, seed_char, seed_scans: dict, jobs, depth, tau, levels, ladders=None):
+    """(island, near, inside) of the island check on the coarse cut model for jobs with answers at
+    `depth` (refinement `levels`): from the level-0 winding count's interpolant where the job has
+    one (`ladder_islands`; `ladders`: one (depth, coefficients, bound) or None per job), else from
+    the flip-seed scan where it covers the range (`_islands_from_seed_scan`; `seed_char` is the
+    coarse model, possibly without the irrelevant modes), else a scan of the whole structure
+    (`full`). Where the seed scan sees an island or a multiplier within FLIP_NEAR of -1 for a
+    level-0 answer, a refined scan of the whole structure decides (the seed scan samples other
+    depths: a narrow island can fall between its points and not between the refined scan's).
+    inside: the bracket of the coarse model's island's lower end (`ladder_islands`; NaN where
+    none or not known)."""
+    depth, tau = np.asarray(depth, dtype=float), np.asarray(tau, dtype=float)
+    ladders = [None] * len(depth) if ladders is None else ladders
+    hit, near = np.zeros(len(depth), bool), np.zeros(len(depth), bool)
+    inside = np.full(len(depth), np.nan)
+    laddered = np.array([x is not None for x in ladders], bool)
+    for q in np.flatnonzero(laddered):
+        hit[q], near[q], inside[q] = ladder_islands(full, *ladders[q], depth[q], tau[q])
+    rest = np.flatnonzero(~laddered)
+    if not len(rest):
+        return hit, near, inside
+    h, n, covered = _islands_from_seed_scan(seed_char, seed_scans, [jobs[q] for q in rest], depth[rest], tau[rest])
+    hit[rest], near[rest] = h, n
     if not covered.all():
-        hit[~covered], near[~covered] = flip_islands(full, depth[~covered], tau[~covered], refine=False)
-    again = np.flatnonzero(covered & (hit | near) & (np.asarray(levels) == 0))
+        hit[rest[~covered]], near[rest[~covered]] = flip_islands(full, depth[rest[~covered]], tau[rest[~covered]], refine=False)
+    again = rest[covered & (hit[rest] | near[rest]) & (np.asarray(levels)[rest] == 0)]
     if len(again):
         hit[again], near[again] = flip_islands(full, depth[again], tau[again])
-    return hit, near
+    hit[rest] &= np.asarray(levels)[rest] == 0  # a scan this sparse decides at level 0 only
+    return hit, near, inside
+
+
+#: The flip-island check from the winding count's interpolant (`ladder_islands`): depths
+#: FLIP_RANGE[0] to LADDER_SPLIT x the answer LADDER_RATIO[0] apart, from there to
+#: VERIFY_FRACTION x it LADDER_RATIO[1] apart (a 13-point scan, 1.21 apart, passed over an island
+#: 4 % wide, 0.508-0.530 mm under a 0.544 mm answer, in the blind search; 1.02 all the way costs
+#: 5 % of a 300-speed lobe diagram, this 3 %). A coarse model's island under an answer at a finer
+#: resolution is looked for there between its depth / ISLAND_WIDEN and x ISLAND_WIDEN, LADDER_RATIO[1]
+#: apart (`dense_flip`).
+LADDER_RATIO = (1.05, 1.02)
+LADDER_SPLIT = 0.5
+ISLAND_WIDEN = 1.1
+
+
+def ladder_islands(char, a0: float, coef: np.ndarray, bound: float, depth: float, tau: float):
+    """(island, near, inside) below `depth` from the interpolant of the winding count at a0
+    (`unstable_count(polynomial=...)`): M(a0 (1 - nu)) = sum coef_k nu^k is entire in nu and the
+    interpolant's error bound holds on the whole disk |nu| <= 1, so nu = 1 - 2 a / a0 (real) gives
+    the flip condition's M(2 a) at every a in (0, a0] without an exponential. The sign of
+    det(I + M(2 a)) is (-1)^(number of real multipliers below -1); it is taken at depths
+    FLIP_RANGE[0] to VERIFY_FRACTION x depth (LADDER_RATIO, LADDER_SPLIT), on the interpolant P where
+    |(I + P)^-1|_F x bound < 1 (then every eigenvalue of I + (I + P)^-1 dM lies within 1 of 1:
+    det(I + M) has the sign of det(I + P)), elsewhere (and above a0) on M itself. island: the
+    sign changes along the ladder; near: |(I + M)^-1|_F >= 1 / FLIP_NEAR somewhere on it (so
+    wherever a multiplier comes within FLIP_NEAR of -1: |(I + M)^-1|_2 >= 1 / |1 + sigma| for
+    every eigenvalue sigma); inside: the geometric middle of the first bracket of the change, a
+    Newton start for the island's lower flip point (NaN where none)."""
+    n2 = coef.shape[-1]
+    eye = np.eye(n2)
+    (lo, ratio_lo), (mid, ratio) = (FLIP_RANGE[0], LADDER_RATIO[0]), (LADDER_SPLIT, LADDER_RATIO[1])
+    a = depth * np.concatenate([np.geomspace(lo, mid, int(np.ceil(np.log(mid / lo) / np.log(ratio_lo))), endpoint=False),
+                                np.geomspace(mid, VERIFY_FRACTION, int(np.ceil(np.log(VERIFY_FRACTION / mid) / np.log(ratio))) + 1)])
+    M = np.zeros((len(a), n2, n2))
+    inner = a <= a0
+    nu = 1.0 - 2.0 * a[inner] / a0
+    M[inner] = (nu[:, None] ** np.arange(len(coef))[None, :] @ np.ascontiguousarray(coef.real).reshape(len(coef), -1)).reshape(-1, n2, n2)  # real nu: real M
+    with np.errstate(all="ignore"):
+        size = np.linalg.norm(_solve_each(eye + M, np.broadcast_to(eye, M.shape)), axis=(1, 2))
+    direct = ~(inner & (size * bound < 1.0))
+    if direct.any():
+        with np.errstate(all="ignore"):
+            M[direct] = char.monodromy(2.0 * a[direct], np.full(int(direct.sum()), tau)).real
+            size[direct] = np.linalg.norm(_solve_each(eye + M[direct], np.broadcast_to(eye, M[direct].shape)), axis=(1, 2))
+    island, inside = _sign_change(a, M)
+    return island, bool(np.any(~(size < 1.0 / FLIP_NEAR))), inside
+
+
+def _sign_change(a: np.ndarray, M: np.ndarray):
+    """(changed, where) along increasing depths a: whether the sign of det(I + M(2 a)) changes
+    (points with a non-finite M skipped) and the geometric middle of the first bracket (NaN)."""
+    with np.errstate(all="ignore"):
+        sign, _ = np.linalg.slogdet(np.eye(M.shape[-1]) + M)
+    ok = np.flatnonzero(np.isfinite(sign) & (sign != 0))
+    changed = ok[1:][sign[ok[1:]] != sign[ok[0]]] if len(ok) else ok
+    if not len(changed):
+        return False, np.nan
+    k = int(np.searchsorted(ok, changed[0]))
+    return True, float(np.sqrt(a[ok[k - 1]] * a[changed[0]]))
+
+
+def dense_flip(char, lo: float, hi: float, tau: float):
+    """(island, inside): `_sign_change` at depths lo .. hi, LADDER_RATIO[1] apart, on `char`
+    (monodromies: one real batch)."""
+    a = np.geomspace(lo, hi, max(2, int(np.ceil(np.log(hi / lo) / np.log(LADDER_RATIO[1]))) + 1))
+    with np.errstate(all="ignore"):
+        M = char.monodromy(2.0 * a, np.full(len(a), tau)).real
+    return _sign_change(a, M)
 
 
 # --- boundary-point solvers ---------------------------------------------------------------------
@@ -1017,7 +1101,8 @@ def monodromy_polynomial(half: np.ndarray, N: int):
     return coef[: N // 2], (2.0 * half.shape[-1] * tail if good else np.inf)
 
 
-def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int | None = None, max_points: int = 4096, extra=()):
+def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int | None = None, max_points: int = 4096, extra=(),
+                   polynomial: list | None = None):
     """Number of Floquet multipliers outside the unit circle at depth a (argument principle):
     zeros of h(nu) = det(I - nu M(a (1 - nu))) in |nu| < 1 (h entire, h(0) = 1, conjugate
     symmetric). The phase of h is followed over theta in [0, pi] (nu = exp(-i theta)), the grid
@@ -1033,7 +1118,9 @@ def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int
     (I - nu M)^-1 dM is below ln 2, |h_interpolated / h - 1| < 1, and both have the same zeros
     in the disk: Rouche). M's roots of unity double (INTERP_NODES, products only) until its
     polynomial converges; the segments' roots double (SUBSTEP_NODES) where a sample fails the
-    check; after that the count samples M directly."""
+    check; after that the count samples M directly. `polynomial` (a list): the interpolant the
+    count used, (Taylor coefficients in nu, Frobenius bound of its error on |nu| <= 1), is
+    appended to it (`ladder_islands` reuses it below a)."""
     th = np.linspace(0.0, np.pi, VERIFY_POINTS if start is None else start)
     # the free multipliers' angles always: lightly damped robot modes put several zeros of h
     # within 1e-3 of the circle inside one step of the uniform grid, and their half turns of
@@ -1057,9 +1144,12 @@ def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int
                 N *= 2
                 continue
             try:
-                return _winding(functools.partial(_interpolated_sample, coef, bound + product_bound), th, max_points)
+                out = _winding(functools.partial(_interpolated_sample, coef, bound + product_bound), th, max_points)
             except _Unsafe:  # the segments' interpolants are not accurate enough: more roots
                 break
+            if polynomial is not None:
+                polynomial.append((coef, bound + product_bound))
+            return out
 
     def direct(t):
         M = char.monodromy(a * (1.0 - np.exp(-1j * t)), np.full(len(t), tau))
@@ -1507,7 +1597,7 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
         cands.append((a0[m], np.where(t0[m] > np.pi, 2 * np.pi - t0[m], t0[m]), [v0[i] for i in m], np.where(t0[m] > np.pi, np.conj(g0[m]), g0[m]),
                       np.array([isinstance(search[seed_key[i]], ProjectedCharacteristic) for i in m], bool)))
         start_of.append(tuple(zip(cands[-1][0].tolist(), cands[-1][1].tolist(), cands[-1][3].tolist(), cands[-1][2])))
-    points, missed = _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol, verify, seed_level, branch_families, hinted, frequencies)
+    points, missed, ladders = _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol, verify, seed_level, branch_families, hinted, frequencies)
     # a neighbour starts from every point the search converged on and from the reported branches
     # (a repaired one included: the seeds of a neighbour would miss it too)
     points = [p if p is None else dataclasses.replace(p, starts=st + tuple((a, th, np.nan, None) for a, _, th in p.branches if not any(abs(a - b) <= 1e-3 * a for b, *_ in st)))
@@ -1517,9 +1607,10 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
         redo = _solve([dyns[s]], cut, rpm[[e]], rel_tol, p.substeps_per_rad / 2.0, True, True, branch_families, frequencies=frequencies)[0][0]
         # a converged boundary point bounds the critical depth from above: never trade it for a higher one
         points[j] = redo if redo.depth_m < p.depth_m else dataclasses.replace(p, verified=False)
+        ladders.pop(j, None)
     # period-doubling islands below the answer, at the answer's own resolution (scanned there
     # where the coarse cut model shows one or comes near): where one is, the job is solved
-    # again from the seeds at that resolution (its flip seeds find the island there)
+    # again at that resolution, from the seeds and from the island's lowest scanned point
     scan: dict = {}
     for j, (s, e) in enumerate(jobs):
         p = points[j]
@@ -1529,16 +1620,20 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
         group = np.array(group)
         levels = np.array([_level(points[j].substeps_per_rad, base) for j in group])
         depths, taus = np.array([points[j].depth_m for j in group]), tau_all[[jobs[j][1] for j in group]]
-        hit, near = _coarse_islands(char(s, 0, True), char(s, seed_level), seed_scans if seed_level == 0 else {}, group, depths, taus, levels)
-        hit &= levels == 0
+        hit, near, inside = _coarse_islands(char(s, 0, True), char(s, seed_level), seed_scans if seed_level == 0 else {}, group, depths, taus, levels,
+                                            [ladders.get(j) for j in group])
         for level in np.unique(levels[(hit | near) & (levels > 0)]):
             sub = np.flatnonzero((hit | near) & (levels == level))
-            hit[sub] = flip_islands(char(s, int(level), True), depths[sub], taus[sub])[0]
-        for j in group[hit]:
+            fine = char(s, int(level), True)
+            coarse_hit, hit[sub] = hit[sub].copy(), flip_islands(fine, depths[sub], taus[sub])[0]
+            for q in sub[coarse_hit & ~hit[sub] & np.isfinite(inside[sub])]:  # densely around the coarse model's island
+                hit[q], inside[q] = dense_flip(fine, inside[q] / ISLAND_WIDEN, min(inside[q] * ISLAND_WIDEN, VERIFY_FRACTION * depths[q]), taus[q])
+        for q, j in zip(np.flatnonzero(hit), group[hit]):
             p = points[j]
             redo = None
             if p.substeps_per_rad < MAX_SUBSTEPS_PER_RAD:
-                redo = _solve([dyns[s]], cut, rpm[[jobs[j][1]]], rel_tol, p.substeps_per_rad, True, True, branch_families, frequencies=frequencies)[0][0]
+                starts = [[(float(inside[q]), np.pi, np.nan, None), (p.depth_m, p.theta_rad, np.nan, None)]] if np.isfinite(inside[q]) else None
+                redo = _solve([dyns[s]], cut, rpm[[jobs[j][1]]], rel_tol, p.substeps_per_rad, True, True, branch_families, hints=starts, frequencies=frequencies)[0][0]
             # an island the seeds still miss: the answer is known to be too high
             points[j] = redo if redo is not None and redo.depth_m < p.depth_m else dataclasses.replace(p, verified=False)
     again = [j for j in range(len(jobs)) if points[j] is None]
@@ -1587,12 +1682,14 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
     job), refined in resolution until the error estimate is below rel_tol / 2, put back on the
     full structure (irrelevant modes), chatter frequency. Newton steps batched over jobs. A
     `hinted` job is always verified; where its count is not 0 its point is None (the caller
-    solves it again from the seeds)."""
+    solves it again from the seeds). Also returns the jobs the half-resolution count rejects and
+    each verified job's level-0 count interpolant ({job: (depth, coefficients, bound)})."""
     hinted = np.zeros(len(jobs), bool) if hinted is None else hinted
     retry = np.zeros(len(jobs), bool)
     J = len(jobs)
     repaired = np.zeros(J, bool)
     verified = [None] * J
+    ladders: dict = {}  # job -> (depth, its level-0 count's interpolant): `ladder_islands`
     # near ties at the seed level (band searches: twice as wide), flattened
     ej, ea, et, ev, eg, ep = [], [], [], [], [], []
     for j, (ca, ct, cv, cg, cp) in enumerate(cands):
@@ -1655,7 +1752,10 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
             mine = np.flatnonzero(ej == j)
             top = ea[mine].min() if len(mine) else np.inf
             if len(mine):
-                count, resolved, _ = unstable_count(c0, VERIFY_FRACTION * top, tau, extra=et[mine])
+                poly: list = []
+                count, resolved, _ = unstable_count(c0, VERIFY_FRACTION * top, tau, extra=et[mine], polynomial=poly)
+                if poly:
+                    ladders[j] = (VERIFY_FRACTION * top,) + poly[0]
             else:
                 count, resolved = 1, True
             if (count > 0 or not resolved) and hinted[j]:
@@ -1668,7 +1768,11 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
                     add_j.append(j)
                     add_a.append(extra[0])
                     add_t.append(extra[1])
-                    count, resolved, _ = unstable_count(c0, VERIFY_FRACTION * extra[0], tau)
+                    poly = []
+                    count, resolved, _ = unstable_count(c0, VERIFY_FRACTION * extra[0], tau, polynomial=poly)
+                    ladders.pop(j, None)
+                    if poly:
+                        ladders[j] = (VERIFY_FRACTION * extra[0],) + poly[0]
             verified[j] = bool(count == 0 and resolved)
         if add_j:
             ej = np.concatenate([ej, add_j])
@@ -1774,7 +1878,7 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
         a, hz, th, family, er = branches[0]
         points.append(CriticalPoint(r, a, hz, th, family, base * 2.0**lv, er, bool(conv_job[j] and er <= rel_tol), verified[j],
                                     tuple((b[0], b[1], b[2]) for b in branches), bool(repaired[j])))
-    return points, missed
+    return points, missed, ladders
 
 
 def _dedupe(a, t, rel: float = 1e-5, index: bool = False):
