@@ -910,7 +910,8 @@ def _critical_log(char, a, theta, tau, target=None, idx=None, mode=None, vec=Non
         lg = np.log(sig)
     r = np.arange(len(todo))
     ref = np.zeros(len(todo), dtype=complex) if target is None else target[todo]
-    dist = np.abs(lg - ref[:, None])
+    with np.errstate(invalid="ignore"):  # ln 0 = -inf against an infinite target: no candidate
+        dist = np.abs(lg - ref[:, None])
     if mode is not None:
         md = mode[todo]
         n = M.shape[-1] // 2
@@ -922,7 +923,8 @@ def _critical_log(char, a, theta, tau, target=None, idx=None, mode=None, vec=Non
     followed = has_vec[todo]
     if followed.any():
         overlap = np.abs(np.einsum("bi,bij->bj", np.conj(vec[todo[followed]]), V[followed]))
-        score = overlap / (1.0 + np.abs(lg[followed] - ref[followed, None]))
+        with np.errstate(invalid="ignore"):
+            score = overlap / (1.0 + np.abs(lg[followed] - ref[followed, None]))
         pick[followed] = np.argmax(np.where(np.isfinite(score), score, -1.0), axis=1)
     out_g[todo], out_v[todo] = lg[r, pick], V[r, :, pick]
     return out_g, out_v
