@@ -86,7 +86,7 @@ and so gives M(2 a) at every depth below the count's without an exponential (`la
 depths 2 % apart: the sign of det(I + M(2 a))), else on the flip seeds' own scan of that model
 (`_islands_from_seed_scan`) or a scan (`flip_islands`); then, where a multiplier is below -1 or
 within FLIP_NEAR of it, at the answer's own resolution (islands appear with a finer cut model;
-around the coarse model's island at the ladder's spacing, `dense_flip`). Where one is found
+after the ladder, densely where it came near -1 or found an island, `dense_flip`). Where one is found
 the job is solved again at that resolution, from the seeds and the island's lower end, and an
 answer that cannot be brought below the island is marked not verified. Hopf islands (complex multipliers)
 are not scanned for: they are found only where a seed leads to their lowest point (a band seed
@@ -740,7 +740,7 @@ def _islands_from_seed_scan(char, scans: dict, jobs, depth, tau):
 
 
 def _coarse_islands(full, seed_char, seed_scans: dict, jobs, depth, tau, levels, ladders=None):
-    """(island, near, inside) of the island check on the coarse cut model for jobs with answers at
+    """(island, near, inside, spans) of the island check on the coarse cut model for jobs with answers at
     `depth` (refinement `levels`): from the level-0 winding count's interpolant where the job has
     one (`ladder_islands`; `ladders`: one (depth, coefficients, bound) or None per job), else from
     the flip-seed scan where it covers the range (`_islands_from_seed_scan`; `seed_char` is the
@@ -749,17 +749,20 @@ def _coarse_islands(full, seed_char, seed_scans: dict, jobs, depth, tau, levels,
     level-0 answer, a refined scan of the whole structure decides (the seed scan samples other
     depths: a narrow island can fall between its points and not between the refined scan's).
     inside: the bracket of the coarse model's island's lower end (`ladder_islands`; NaN where
-    none or not known)."""
+    none or not known); spans: where the answer's resolution is to be looked at (`ladder_islands`;
+    None: everywhere below the answer)."""
     depth, tau = np.asarray(depth, dtype=float), np.asarray(tau, dtype=float)
     ladders = [None] * len(depth) if ladders is None else ladders
     hit, near = np.zeros(len(depth), bool), np.zeros(len(depth), bool)
     inside = np.full(len(depth), np.nan)
     laddered = np.array([x is not None for x in ladders], bool)
+    spans = [None] * len(depth)
     for q in np.flatnonzero(laddered):
-        hit[q], near[q], inside[q] = ladder_islands(full, *ladders[q], depth[q], tau[q])
+        hit[q], spans[q], inside[q] = ladder_islands(full, *ladders[q], depth[q], tau[q])
+        near[q] = bool(spans[q])
     rest = np.flatnonzero(~laddered)
     if not len(rest):
-        return hit, near, inside
+        return hit, near, inside, spans
     h, n, covered = _islands_from_seed_scan(seed_char, seed_scans, [jobs[q] for q in rest], depth[rest], tau[rest])
     hit[rest], near[rest] = h, n
     if not covered.all():
@@ -768,23 +771,23 @@ def _coarse_islands(full, seed_char, seed_scans: dict, jobs, depth, tau, levels,
     if len(again):
         hit[again], near[again] = flip_islands(full, depth[again], tau[again])
     hit[rest] &= np.asarray(levels)[rest] == 0  # a scan this sparse decides at level 0 only
-    return hit, near, inside
+    return hit, near, inside, spans
 
 
 #: The flip-island check from the winding count's interpolant (`ladder_islands`): depths
 #: FLIP_RANGE[0] to LADDER_SPLIT x the answer LADDER_RATIO[0] apart, from there to
 #: VERIFY_FRACTION x it LADDER_RATIO[1] apart (a 13-point scan, 1.21 apart, passed over an island
 #: 4 % wide, 0.508-0.530 mm under a 0.544 mm answer, in the blind search; 1.02 all the way costs
-#: 5 % of a 300-speed lobe diagram, this 3 %). A coarse model's island under an answer at a finer
-#: resolution is looked for there between its depth / ISLAND_WIDEN and x ISLAND_WIDEN, LADDER_RATIO[1]
-#: apart (`dense_flip`).
+#: 5 % of a 300-speed lobe diagram, this 3 %). Under an answer at a finer resolution, that
+#: resolution is looked at LADDER_RATIO[1] apart around every run of ladder points near -1 and
+#: around the coarse island, widened by ISLAND_WIDEN either side (`dense_flip`).
 LADDER_RATIO = (1.05, 1.02)
 LADDER_SPLIT = 0.5
 ISLAND_WIDEN = 1.1
 
 
 def ladder_islands(char, a0: float, coef: np.ndarray, bound: float, depth: float, tau: float):
-    """(island, near, inside) below `depth` from the interpolant of the winding count at a0
+    """(island, spans, inside) below `depth` from the interpolant of the winding count at a0
     (`unstable_count(polynomial=...)`): M(a0 (1 - nu)) = sum coef_k nu^k is entire in nu and the
     interpolant's error bound holds on the whole disk |nu| <= 1, so nu = 1 - 2 a / a0 (real) gives
     the flip condition's M(2 a) at every a in (0, a0] without an exponential. The sign of
@@ -792,10 +795,12 @@ def ladder_islands(char, a0: float, coef: np.ndarray, bound: float, depth: float
     FLIP_RANGE[0] to VERIFY_FRACTION x depth (LADDER_RATIO, LADDER_SPLIT), on the interpolant P where
     |(I + P)^-1|_F x bound < 1 (then every eigenvalue of I + (I + P)^-1 dM lies within 1 of 1:
     det(I + M) has the sign of det(I + P)), elsewhere (and above a0) on M itself. island: the
-    sign changes along the ladder; near: |(I + M)^-1|_F >= 1 / FLIP_NEAR somewhere on it (so
-    wherever a multiplier comes within FLIP_NEAR of -1: |(I + M)^-1|_2 >= 1 / |1 + sigma| for
-    every eigenvalue sigma); inside: the geometric middle of the first bracket of the change, a
-    Newton start for the island's lower flip point (NaN where none)."""
+    sign changes along the ladder; spans: the depth intervals a finer cut model's island can lie
+    in, each run of ladder points with |(I + M)^-1|_F >= 1 / FLIP_NEAR (wherever a multiplier
+    comes within FLIP_NEAR of -1: |(I + M)^-1|_2 >= 1 / |1 + sigma| for every eigenvalue sigma)
+    and the island, widened by ISLAND_WIDEN either side; inside: the geometric middle of the
+    first bracket of the change, a Newton start for the island's lower flip point (NaN where
+    none)."""
     n2 = coef.shape[-1]
     eye = np.eye(n2)
     (lo, ratio_lo), (mid, ratio) = (FLIP_RANGE[0], LADDER_RATIO[0]), (LADDER_SPLIT, LADDER_RATIO[1])
@@ -813,7 +818,12 @@ def ladder_islands(char, a0: float, coef: np.ndarray, bound: float, depth: float
             M[direct] = char.monodromy(2.0 * a[direct], np.full(int(direct.sum()), tau)).real
             size[direct] = np.linalg.norm(_solve_each(eye + M[direct], np.broadcast_to(eye, M[direct].shape)), axis=(1, 2))
     island, inside = _sign_change(a, M)
-    return island, bool(np.any(~(size < 1.0 / FLIP_NEAR))), inside
+    close = ~(size < 1.0 / FLIP_NEAR)
+    runs = np.flatnonzero(np.diff(np.concatenate([[0], close.astype(int), [0]])))  # starts and ends of the near runs
+    spans = [(a[i] / ISLAND_WIDEN, a[k - 1] * ISLAND_WIDEN) for i, k in zip(runs[::2], runs[1::2])]
+    if island:
+        spans.insert(0, (inside / ISLAND_WIDEN, inside * ISLAND_WIDEN))
+    return island, spans, inside
 
 
 def _sign_change(a: np.ndarray, M: np.ndarray):
@@ -1622,14 +1632,22 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
         group = np.array(group)
         levels = np.array([_level(points[j].substeps_per_rad, base) for j in group])
         depths, taus = np.array([points[j].depth_m for j in group]), tau_all[[jobs[j][1] for j in group]]
-        hit, near, inside = _coarse_islands(char(s, 0, True), char(s, seed_level), seed_scans if seed_level == 0 else {}, group, depths, taus, levels,
-                                            [ladders.get(j) for j in group])
+        hit, near, inside, spans = _coarse_islands(char(s, 0, True), char(s, seed_level), seed_scans if seed_level == 0 else {}, group, depths, taus, levels,
+                                                   [ladders.get(j) for j in group])
         for level in np.unique(levels[(hit | near) & (levels > 0)]):
             sub = np.flatnonzero((hit | near) & (levels == level))
             fine = char(s, int(level), True)
-            coarse_hit, hit[sub] = hit[sub].copy(), flip_islands(fine, depths[sub], taus[sub])[0]
-            for q in sub[coarse_hit & ~hit[sub] & np.isfinite(inside[sub])]:  # densely around the coarse model's island
-                hit[q], inside[q] = dense_flip(fine, inside[q] / ISLAND_WIDEN, min(inside[q] * ISLAND_WIDEN, VERIFY_FRACTION * depths[q]), taus[q])
+            whole = np.array([q for q in sub if spans[q] is None], int)
+            if len(whole):
+                hit[whole] = flip_islands(fine, depths[whole], taus[whole])[0]
+            for q in (q for q in sub if spans[q] is not None):  # densely where the coarse ladder came near -1
+                hit[q], inside[q] = False, np.nan
+                for lo, hi in spans[q]:
+                    hi = min(hi, VERIFY_FRACTION * depths[q])
+                    if lo < hi:
+                        hit[q], inside[q] = dense_flip(fine, lo, hi, taus[q])
+                        if hit[q]:
+                            break
         for q, j in zip(np.flatnonzero(hit), group[hit]):
             p = points[j]
             redo = None
