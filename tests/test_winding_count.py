@@ -89,3 +89,21 @@ def test_robot_modes_close_to_the_circle_do_not_alias_the_count():
     args = (ROBOT_ROWS, ROBOT_CUT.teeth, ROBOT_CUT.kt_pa, ROBOT_CUT.kn_pa, ROBOT_CUT.radial_immersion, ROBOT_CUT.milling, rpm)
     assert not sim.grows(*args, 0.9 * result.depth_m)
     assert sim.grows(*args, 1.05 * result.depth_m)
+
+
+def test_the_inverse_norm_screen_agrees_with_the_inverse():
+    """Every sample's Rouche check needs |D^-1|_F below a limit; a bound from det D and |D|_F
+    (AM-GM on the other singular values) decides most samples without an inverse. It must give
+    exactly the answer of the inverse, on well-conditioned, nearly singular and large matrices."""
+    rng = np.random.default_rng(7)
+    m = 24
+    D = rng.normal(size=(300, m, m)) + 1j * rng.normal(size=(300, m, m))
+    D[:100] = np.eye(m) + 0.05 * D[:100]  # well conditioned: decided by the bound
+    u, s, vh = np.linalg.svd(D[100:200])
+    s[:, -1] *= 10.0 ** rng.uniform(-14, 0, size=100)  # nearly singular
+    D[100:200] = u @ (s[:, :, None] * vh)
+    D[200:] *= 10.0 ** rng.uniform(-3, 3, size=(100, 1, 1))
+    _, logdet = np.linalg.slogdet(D)
+    exact = np.linalg.norm(np.linalg.inv(D), axis=(1, 2))
+    for limit in (1e2, 1e6, 1e12):
+        assert np.array_equal(floquet._inverse_norms_below(D, logdet, limit), exact < limit)

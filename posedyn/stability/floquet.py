@@ -810,7 +810,7 @@ def ladder_islands(char, a0: float, coef: np.ndarray, bound: float, depth: float
     inner = a <= a0
     nu = 1.0 - 2.0 * a[inner] / a0
     M[inner] = (nu[:, None] ** np.arange(len(coef))[None, :] @ np.ascontiguousarray(coef.real).reshape(len(coef), -1)).reshape(-1, n2, n2)  # real nu: real M
-    with np.errstate(all="ignore"):
+    with np.errstate(all="ignore"):  # (the near test needs every inverse: no cheaper bound first)
         size = np.linalg.norm(_solve_each(eye + M, np.broadcast_to(eye, M.shape)), axis=(1, 2))
     direct = ~(inner & (size * bound < 1.0))
     if direct.any():
@@ -1176,16 +1176,32 @@ def _interpolated_sample(coef: np.ndarray, bound: float, t: np.ndarray):
     nu = exp(-i t); raises _Unsafe where sqrt(2n) |(I - nu M)^-1|_F x bound (M's Frobenius error)
     reaches INTERP_SAFE (`unstable_count`)."""
     n2 = coef.shape[-1]
-    eye = np.eye(n2)
     nu = np.exp(-1j * t)
     M = (nu[:, None] ** np.arange(len(coef))[None, :] @ coef.reshape(len(coef), -1)).reshape(len(t), n2, n2)
-    D = eye - nu[:, None, None] * M
+    D = np.eye(n2) - nu[:, None, None] * M
     with np.errstate(all="ignore"):
         sign, logdet = np.linalg.slogdet(D)
-        inverse = _solve_each(D, np.broadcast_to(eye, D.shape))
-    if not np.all(np.sqrt(n2) * np.linalg.norm(inverse, axis=(1, 2)) * bound < INTERP_SAFE):
+        limit = INTERP_SAFE / (np.sqrt(n2) * np.float64(bound))  # inf for an exact interpolant
+    if not np.all(_inverse_norms_below(D, logdet, limit)):
         raise _Unsafe
     return np.angle(sign), logdet
+
+
+def _inverse_norms_below(D: np.ndarray, logdet: np.ndarray, limit: float) -> np.ndarray:
+    """Whether |D^-1|_F < limit for each matrix of a batch, given ln |det D|: first by the bound
+    |D^-1|_F <= sqrt(m) / sigma_min <= sqrt(m) (|D|_F^2 / (m - 1))^((m - 1) / 2) / |det D| (the
+    product of the other m - 1 singular values by the AM-GM inequality), which decides almost
+    every sample away from a zero of det D without an inverse; the inverse for the rest."""
+    m = D.shape[-1]
+    with np.errstate(all="ignore"):
+        fro2 = np.einsum("bij,bij->b", D.conj(), D).real
+        log_bound = 0.5 * np.log(m) + 0.5 * (m - 1) * np.log(fro2 / (m - 1)) - logdet
+        below = log_bound < np.log(limit)
+        unsure = np.flatnonzero(~below)
+        if len(unsure):
+            inverse = _solve_each(D[unsure], np.broadcast_to(np.eye(m), D[unsure].shape))
+            below[unsure] = np.linalg.norm(inverse, axis=(1, 2)) < limit
+    return below
 
 
 class _Unsafe(Exception):
