@@ -141,3 +141,32 @@ def test_hills_seeds_lead_to_an_island_the_zeroth_order_misses():
     assert r.verified and r.converged and r.depth_m < 5e-3
     (depth, theta), residual = exact_boundary_point(dyn, RANDOM_CUT, RANDOM_RPM, r.depth_m, r.theta_rad)
     assert residual < 1e-8 and abs(r.depth_m / depth - 1.0) < 0.02
+
+
+#: Another random absorber-coupled structure of the blind search (2 teeth, up milling a/D 0.56,
+#: 11,916 rpm): an island of complex multipliers from 5.96 mm that exists only with a finer cut
+#: model (none at 4 sub-steps a radian, from 6.15 mm at 8, from 5.96 mm at 16), under a 9.88 mm
+#: answer the engine reported verified.
+FINE_HOST = [
+    ("x", 10.2127009057723, 0.03728300580608988, 653476.2287403669), ("x", 44.78024501520054, 0.07815885073197382, 432311.0867128087),
+    ("x", 1679.2232418482226, 0.04038428872244494, 7808958.828663263), ("x", 7931.957943391557, 0.04916432951890052, 27541331.169412237),
+    ("y", 17.29987447293256, 0.049850686759838954, 3251287.475134527), ("y", 48.81930339954994, 0.06935844224709932, 4088394.975860864),
+    ("y", 665.2724974685877, 0.055534000923961026, 24432825.49411955), ("y", 3482.0968562662842, 0.0383734360967785, 54038615.5519196),
+]
+FINE_ABSORBER = (4.845756264648422, 1068811.6802897346, 0.08958282099375106)
+FINE_CUT = Cut(teeth=2, kt_pa=1936175782.7479324, kn_pa=287855714.0924721, radial_immersion=0.5629524006183383, milling="up")
+FINE_RPM = 11916.151694649065
+
+
+def test_an_island_only_a_finer_cut_model_has_is_found_from_hills_seeds_there():
+    """Hill's lowest boundary point (6.30 mm, theta 0.91) reaches no boundary point on the coarse
+    cut model, where the island does not exist; such a seed below the answer is tried once more at
+    the answer's resolution. The bottom is a boundary point of the DOP853 characteristic."""
+    host = ToolTipDynamics.from_modes(x=[Mode(f, z, k) for d, f, z, k in FINE_HOST if d == "x"], y=[Mode(f, z, k) for d, f, z, k in FINE_HOST if d == "y"])
+    dyn = with_absorber(host, *FINE_ABSORBER)
+    coarse = floquet.FloquetCharacteristic(dyn, FINE_CUT, floquet.SUBSTEPS_PER_RAD)
+    assert floquet.unstable_count(coarse, 6.5e-3, float(FINE_CUT.tooth_period_s(FINE_RPM)))[:2] == (0, True)  # no island there
+    r = floquet.critical_depth(dyn, FINE_CUT, FINE_RPM)
+    assert r.verified and r.converged and r.depth_m < 6.5e-3
+    (depth, theta), residual = exact_boundary_point(dyn, FINE_CUT, FINE_RPM, r.depth_m, r.theta_rad)
+    assert residual < 1e-8 and abs(r.depth_m / depth - 1.0) < 0.02

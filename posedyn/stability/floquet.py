@@ -91,7 +91,9 @@ the job is solved again at that resolution, from the seeds and the island's lowe
 answer that cannot be brought below the island is marked not verified. Hopf islands (complex multipliers)
 are not scanned for: they are found only where a seed leads to their lowest point (a band seed
 whose Newton fails below the job's lowest point is tried again on the whole structure: the band
-projection lost one; a coupled structure also gets HILL_SEEDS of Hill's boundary points; both in
+projection lost one; a coupled structure also gets HILL_SEEDS of Hill's boundary points, and
+those that reach none on the coarse cut model below an answer at a finer resolution are tried
+once more there: such an island can exist only with the finer model; all in
 tests/test_hopf_islands.py), and any converged boundary point bounds the answer from above (a
 re-solve never trades one for a higher point). A blind search over 1503 random
 robot-plus-spindle structures still found 2 verified answers above an island (README).
@@ -1481,6 +1483,7 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
     tau_all = np.asarray(cut.tooth_period_s(rpm), dtype=float).reshape(-1)
     # 1. zeroth-order seeds: per mode band the lowest few, overall the lowest MAX_SEEDS
     seed_job, seed_a, seed_t, seed_m, seed_g, seed_v = [], [], [], [], [], []
+    hill_idx: list = []  # the seeds from Hill's boundary points
     hinted = np.zeros(len(jobs), bool)
     zoa = {}  # job -> its zeroth-order seeds, batched over each structure's delays
     for s in range(len(dyns)):
@@ -1515,6 +1518,7 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
         if HILL_SEEDS and dyns[s].coupling is not None:  # Hill's boundary points (whole structure)
             a_h, t_h = hill.hill_seeds(char(s, 0).frf, char(s, 0).free_eig()[0], cut, tau_all[e])
             a_h, t_h = a_h[:HILL_SEEDS], t_h[:HILL_SEEDS]
+            hill_idx += range(len(seed_job), len(seed_job) + len(a_h))
             seed_job += [j] * len(a_h)
             seed_a += list(a_h)
             seed_t += list(t_h)
@@ -1672,6 +1676,26 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
                 redo = _solve([dyns[s]], cut, rpm[[jobs[j][1]]], rel_tol, p.substeps_per_rad, True, True, branch_families, hints=starts, frequencies=frequencies)[0][0]
             # an island the seeds still miss: the answer is known to be too high
             points[j] = redo if redo is not None and redo.depth_m < p.depth_m else dataclasses.replace(p, verified=False)
+    # Hill's boundary points that reached none on the coarse cut model, below an answer at a finer
+    # resolution: once more there (an island of complex multipliers can exist only with the finer
+    # model, seen: from 5.96 mm under a 9.88 mm answer at 16 sub-steps a radian, none at 4); a
+    # boundary point reached below the answer sends the job back to that resolution from it
+    late: dict = {}
+    for i in hill_idx:
+        p = points[seed_job[i]]
+        if not ok0[i] and p is not None and (verify or hinted[seed_job[i]]) and p.substeps_per_rad > base and seed_a[i] < p.depth_m:
+            late.setdefault((jobs[seed_job[i]][0], _level(p.substeps_per_rad, base)), []).append(i)
+    for (s, level), idx in late.items():
+        idx = np.array(idx, int)
+        a_, t_, ok_, _, _ = _newton(char(s, level, True), seed_a[idx], seed_t[idx], seed_tau[idx], tol=REFINE_TOL)
+        for j in np.unique(seed_job[idx]):
+            p = points[j]
+            below = (seed_job[idx] == j) & ok_ & (a_ < VERIFY_FRACTION * p.depth_m)
+            if below.any():
+                k = np.flatnonzero(below)[np.argmin(a_[below])]
+                starts = [[(float(a_[k]), float(min(np.mod(t_[k], 2 * np.pi), 2 * np.pi - np.mod(t_[k], 2 * np.pi))), np.nan, None), (p.depth_m, p.theta_rad, np.nan, None)]]
+                redo = _solve([dyns[s]], cut, rpm[[jobs[j][1]]], rel_tol, p.substeps_per_rad, True, True, branch_families, hints=starts, frequencies=frequencies)[0][0]
+                points[j] = redo if redo.depth_m < p.depth_m else dataclasses.replace(p, verified=False)
     again = [j for j in range(len(jobs)) if points[j] is None]
     if again:  # hinted jobs the count did not verify: from the seeds
         redo = _solve([dyns[jobs[j][0]] for j in again], cut, rpm[[jobs[j][1] for j in again]], rel_tol, substeps_per_rad, verify, True, branch_families, frequencies=frequencies)
