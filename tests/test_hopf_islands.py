@@ -51,6 +51,12 @@ RANDOM_CUT = Cut(teeth=5, kt_pa=619571634.7892177, kn_pa=114744593.6302568, radi
 RANDOM_RPM = 10359.715885937554
 
 
+def absorber_structure(rows, absorber) -> ToolTipDynamics:
+    """The host of (direction, fn_hz, zeta, k_n_per_m) rows with the absorber (kg, N/m, zeta)."""
+    host = ToolTipDynamics.from_modes(x=[Mode(f, z, k) for d, f, z, k in rows if d == "x"], y=[Mode(f, z, k) for d, f, z, k in rows if d == "y"])
+    return with_absorber(host, *absorber)
+
+
 def exact_log(dyn: ToolTipDynamics, cut: Cut, rpm: float, depth_m: float, theta: float) -> complex:
     """ln(nu mu) for the multiplier mu of the period map nearest 1 / nu (nu = exp(-i theta)):
     q'' + C q' + K q = c W(t) q with c = -a (1 - nu), integrated by DOP853 (rtol 1e-10) over one
@@ -135,8 +141,7 @@ def test_hills_seeds_lead_to_an_island_the_zeroth_order_misses():
     only to the 10.40 mm branch, reported verified; Hill's boundary points (two harmonics) are
     now seeds of every coupled structure. The island's bottom is a boundary point of the DOP853
     characteristic."""
-    host = ToolTipDynamics.from_modes(x=[Mode(f, z, k) for d, f, z, k in RANDOM_HOST if d == "x"], y=[Mode(f, z, k) for d, f, z, k in RANDOM_HOST if d == "y"])
-    dyn = with_absorber(host, *RANDOM_ABSORBER)
+    dyn = absorber_structure(RANDOM_HOST, RANDOM_ABSORBER)
     r = floquet.critical_depth(dyn, RANDOM_CUT, RANDOM_RPM)
     assert r.verified and r.converged and r.depth_m < 5e-3
     (depth, theta), residual = exact_boundary_point(dyn, RANDOM_CUT, RANDOM_RPM, r.depth_m, r.theta_rad)
@@ -162,8 +167,7 @@ def test_an_island_only_a_finer_cut_model_has_is_found_from_hills_seeds_there():
     """Hill's lowest boundary point (6.30 mm, theta 0.91) reaches no boundary point on the coarse
     cut model, where the island does not exist; such a seed below the answer is tried once more at
     the answer's resolution. The bottom is a boundary point of the DOP853 characteristic."""
-    host = ToolTipDynamics.from_modes(x=[Mode(f, z, k) for d, f, z, k in FINE_HOST if d == "x"], y=[Mode(f, z, k) for d, f, z, k in FINE_HOST if d == "y"])
-    dyn = with_absorber(host, *FINE_ABSORBER)
+    dyn = absorber_structure(FINE_HOST, FINE_ABSORBER)
     coarse = floquet.FloquetCharacteristic(dyn, FINE_CUT, floquet.SUBSTEPS_PER_RAD)
     assert floquet.unstable_count(coarse, 6.5e-3, float(FINE_CUT.tooth_period_s(FINE_RPM)))[:2] == (0, True)  # no island there
     r = floquet.critical_depth(dyn, FINE_CUT, FINE_RPM)
