@@ -95,8 +95,8 @@ projection lost one; a coupled structure also gets HILL_SEEDS of Hill's boundary
 those that reach none on the coarse cut model below an answer at a finer resolution are tried
 once more there: such an island can exist only with the finer model; all in
 tests/test_hopf_islands.py), and any converged boundary point bounds the answer from above (a
-re-solve never trades one for a higher point). A blind search over 1503 random
-robot-plus-spindle structures still found 2 verified answers above an island (README).
+re-solve never trades one for a higher point). A blind search over random robot-plus-spindle
+structures still finds verified answers above an island (README: 6 of 2641).
 
 Continuation (`critical_depths(continuation=True)`): structures with similar modes (`modal_path`)
 start Newton on the whole structure from the boundary points the neighbours either side converged
@@ -811,14 +811,13 @@ def ladder_islands(char, a0: float, coef: np.ndarray, bound: float, depth: float
     M = np.zeros((len(a), n2, n2))
     inner = a <= a0
     nu = 1.0 - 2.0 * a[inner] / a0
-    M[inner] = (nu[:, None] ** np.arange(len(coef))[None, :] @ np.ascontiguousarray(coef.real).reshape(len(coef), -1)).reshape(-1, n2, n2)  # real nu: real M
-    with np.errstate(all="ignore"):  # (the near test needs every inverse: no cheaper bound first)
-        size = np.linalg.norm(_solve_each(eye + M, np.broadcast_to(eye, M.shape)), axis=(1, 2))
+    M[inner] = _polynomial_matrices(np.ascontiguousarray(coef.real), nu)  # real nu: real M
+    size = _inverse_norms(eye + M)  # (the near test needs every inverse: no cheaper bound first)
     direct = ~(inner & (size * bound < 1.0))
     if direct.any():
         with np.errstate(all="ignore"):
             M[direct] = char.monodromy(2.0 * a[direct], np.full(int(direct.sum()), tau)).real
-            size[direct] = np.linalg.norm(_solve_each(eye + M[direct], np.broadcast_to(eye, M[direct].shape)), axis=(1, 2))
+        size[direct] = _inverse_norms(eye + M[direct])
     island, inside = _sign_change(a, M)
     close = ~(size < 1.0 / FLIP_NEAR)
     runs = np.flatnonzero(np.diff(np.concatenate([[0], close.astype(int), [0]])))  # starts and ends of the near runs
@@ -1179,8 +1178,7 @@ def _interpolated_sample(coef: np.ndarray, bound: float, t: np.ndarray):
     reaches INTERP_SAFE (`unstable_count`)."""
     n2 = coef.shape[-1]
     nu = np.exp(-1j * t)
-    M = (nu[:, None] ** np.arange(len(coef))[None, :] @ coef.reshape(len(coef), -1)).reshape(len(t), n2, n2)
-    D = np.eye(n2) - nu[:, None, None] * M
+    D = np.eye(n2) - nu[:, None, None] * _polynomial_matrices(coef, nu)
     with np.errstate(all="ignore"):
         sign, logdet = np.linalg.slogdet(D)
         limit = INTERP_SAFE / (np.sqrt(n2) * np.float64(bound))  # inf for an exact interpolant
@@ -1200,10 +1198,20 @@ def _inverse_norms_below(D: np.ndarray, logdet: np.ndarray, limit: float) -> np.
         log_bound = 0.5 * np.log(m) + 0.5 * (m - 1) * np.log(fro2 / (m - 1)) - logdet
         below = log_bound < np.log(limit)
         unsure = np.flatnonzero(~below)
-        if len(unsure):
-            inverse = _solve_each(D[unsure], np.broadcast_to(np.eye(m), D[unsure].shape))
-            below[unsure] = np.linalg.norm(inverse, axis=(1, 2)) < limit
+    if len(unsure):
+        below[unsure] = _inverse_norms(D[unsure]) < limit
     return below
+
+
+def _inverse_norms(D: np.ndarray) -> np.ndarray:
+    """|D^-1|_F of each matrix of a batch (NaN for a singular one)."""
+    with np.errstate(all="ignore"):
+        return np.linalg.norm(_solve_each(D, np.broadcast_to(np.eye(D.shape[-1]), D.shape)), axis=(1, 2))
+
+
+def _polynomial_matrices(coef: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """sum_k coef_k x^k at every x: (len(x), m, m) from coefficients (K, m, m)."""
+    return (x[:, None] ** np.arange(len(coef))[None, :] @ coef.reshape(len(coef), -1)).reshape((len(x),) + coef.shape[1:])
 
 
 class _Unsafe(Exception):
@@ -1634,11 +1642,18 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
     # (a repaired one included: the seeds of a neighbour would miss it too)
     points = [p if p is None else dataclasses.replace(p, starts=st + tuple((a, th, np.nan, None) for a, _, th in p.branches if not any(abs(a - b) <= 1e-3 * a for b, *_ in st)))
               for p, st in zip(points, start_of)]
-    for j in np.flatnonzero(missed):  # a lower branch at half the answer's resolution: from the seeds there
-        s, e, p = jobs[j][0], jobs[j][1], points[j]
-        redo = _solve([dyns[s]], cut, rpm[[e]], rel_tol, p.substeps_per_rad / 2.0, True, True, branch_families, frequencies=frequencies)[0][0]
-        # a converged boundary point bounds the critical depth from above: never trade it for a higher one
+
+    def solve_lower(j, substeps, start=None):
+        """Job j solved again at `substeps` (from the seeds; from `start` = (depth, theta) and
+        its point where given): a converged boundary point bounds the critical depth from above,
+        so the redo replaces the point only where lower, else the point is not verified."""
+        p = points[j]
+        hints = None if start is None else [[(float(start[0]), _fold(start[1]), np.nan, None), (p.depth_m, p.theta_rad, np.nan, None)]]
+        redo = _solve([dyns[jobs[j][0]]], cut, rpm[[jobs[j][1]]], rel_tol, substeps, True, True, branch_families, hints=hints, frequencies=frequencies)[0][0]
         points[j] = redo if redo.depth_m < p.depth_m else dataclasses.replace(p, verified=False)
+
+    for j in np.flatnonzero(missed):  # a lower branch at half the answer's resolution: from the seeds there
+        solve_lower(j, points[j].substeps_per_rad / 2.0)
         ladders.pop(j, None)
     # period-doubling islands below the answer, at the answer's own resolution (scanned there
     # where the coarse cut model shows one or comes near): where one is, the job is solved
@@ -1669,13 +1684,10 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
                         if hit[q]:
                             break
         for q, j in zip(np.flatnonzero(hit), group[hit]):
-            p = points[j]
-            redo = None
-            if p.substeps_per_rad < MAX_SUBSTEPS_PER_RAD:
-                starts = [[(float(inside[q]), np.pi, np.nan, None), (p.depth_m, p.theta_rad, np.nan, None)]] if np.isfinite(inside[q]) else None
-                redo = _solve([dyns[s]], cut, rpm[[jobs[j][1]]], rel_tol, p.substeps_per_rad, True, True, branch_families, hints=starts, frequencies=frequencies)[0][0]
-            # an island the seeds still miss: the answer is known to be too high
-            points[j] = redo if redo is not None and redo.depth_m < p.depth_m else dataclasses.replace(p, verified=False)
+            if points[j].substeps_per_rad < MAX_SUBSTEPS_PER_RAD:
+                solve_lower(j, points[j].substeps_per_rad, (inside[q], np.pi) if np.isfinite(inside[q]) else None)
+            else:  # an island no finer model can be asked about: the answer is known to be too high
+                points[j] = dataclasses.replace(points[j], verified=False)
     # Hill's boundary points that reached none on the coarse cut model, below an answer at a finer
     # resolution: once more there (an island of complex multipliers can exist only with the finer
     # model, seen: from 5.96 mm under a 9.88 mm answer at 16 sub-steps a radian, none at 4); a
@@ -1693,9 +1705,7 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
             below = (seed_job[idx] == j) & ok_ & (a_ < VERIFY_FRACTION * p.depth_m)
             if below.any():
                 k = np.flatnonzero(below)[np.argmin(a_[below])]
-                starts = [[(float(a_[k]), float(min(np.mod(t_[k], 2 * np.pi), 2 * np.pi - np.mod(t_[k], 2 * np.pi))), np.nan, None), (p.depth_m, p.theta_rad, np.nan, None)]]
-                redo = _solve([dyns[s]], cut, rpm[[jobs[j][1]]], rel_tol, p.substeps_per_rad, True, True, branch_families, hints=starts, frequencies=frequencies)[0][0]
-                points[j] = redo if redo.depth_m < p.depth_m else dataclasses.replace(p, verified=False)
+                solve_lower(j, p.substeps_per_rad, (a_[k], t_[k]))
     again = [j for j in range(len(jobs)) if points[j] is None]
     if again:  # hinted jobs the count did not verify: from the seeds
         redo = _solve([dyns[jobs[j][0]] for j in again], cut, rpm[[jobs[j][1] for j in again]], rel_tol, substeps_per_rad, verify, True, branch_families, frequencies=frequencies)
@@ -1705,6 +1715,12 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
     for j, (s, e) in enumerate(jobs):
         results[s][0 if pairs else e] = points[j]
     return results
+
+
+def _fold(theta: float) -> float:
+    """theta folded to [0, pi] (a boundary point and its conjugate are one)."""
+    theta = float(np.mod(theta, 2.0 * np.pi))
+    return min(theta, 2.0 * np.pi - theta)
 
 
 def _level(substeps_per_rad: float, base: float) -> int:
