@@ -25,6 +25,7 @@ import pytest
 import scipy.integrate
 import scipy.linalg
 
+import independent_milling_sim as sim
 from absorber.coupling import with_absorber
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.stability import Cut, floquet
@@ -174,3 +175,37 @@ def test_an_island_only_a_finer_cut_model_has_is_found_from_hills_seeds_there():
     assert r.verified and r.converged and r.depth_m < 6.5e-3
     (depth, theta), residual = exact_boundary_point(dyn, FINE_CUT, FINE_RPM, r.depth_m, r.theta_rad)
     assert residual < 1e-8 and abs(r.depth_m / depth - 1.0) < 0.02
+
+
+#: A random uncoupled structure of the blind search (seed 5, case 1348): rows (direction, fn_hz,
+#: zeta, k_n_per_m); 6 teeth in up milling at a/D 0.23, 3127 rpm. A complex pair is outside the
+#: circle from about 0.5 to 0.8 of 5.54 mm and inside again up to it; the engine reported 5.54 mm,
+#: verified, and the count at 0.995 x that is 0.
+WIDE_ROWS = [
+    ("x", 5.53633551098822, 0.013943193444801622, 11866110.469663233), ("x", 76.79554808254386, 0.04628044815725871, 498562.251531207),
+    ("x", 1759.6983660393676, 0.020526963573863313, 30813663.169850037), ("x", 7042.337090983038, 0.0680749094835634, 6034980.025930906),
+    ("y", 28.034343921894838, 0.02538749461374983, 10043706.030383682), ("y", 116.57130105967398, 0.06574423891352693, 10383607.468590379),
+    ("y", 666.821046370839, 0.02237580116879269, 6263405.543131326), ("y", 3353.411043997595, 0.07374094143338566, 24221238.250454765),
+]
+WIDE = ToolTipDynamics.from_modes(x=[Mode(f, z, k) for d, f, z, k in WIDE_ROWS if d == "x"], y=[Mode(f, z, k) for d, f, z, k in WIDE_ROWS if d == "y"])
+WIDE_CUT = Cut(teeth=6, kt_pa=381954714.1274106, kn_pa=70749907.6231721, radial_immersion=0.23298624678930002, milling="up")
+WIDE_RPM = 3126.7927050531944
+
+
+def test_the_hopf_rungs_find_an_island_the_count_above_it_cannot_see():
+    """The counts at HOPF_RUNGS x the answer on the verification count's interpolant
+    (`hopf_rung`) see the island under the old answer; the reported depth is its bottom: the
+    independent time-domain simulation (tests/independent_milling_sim.py) decays 5 % below it
+    and grows 5 % above."""
+    char = floquet.FloquetCharacteristic(WIDE, WIDE_CUT, floquet.SUBSTEPS_PER_RAD)
+    tau = float(WIDE_CUT.tooth_period_s(WIDE_RPM))
+    poly: list = []
+    a0 = floquet.VERIFY_FRACTION * 5.54e-3
+    assert floquet.unstable_count(char, a0, tau, polynomial=poly)[:2] == (0, True) and poly  # blind above the island
+    rung = floquet.hopf_rung(char, a0, *poly[0], tau)
+    assert rung is not None and floquet.unstable_count(char, rung, tau)[0] > 0  # the rung's count on M itself
+    r = floquet.critical_depth(WIDE, WIDE_CUT, WIDE_RPM)
+    assert r.verified and r.converged and r.depth_m < rung
+    args = (WIDE_ROWS, WIDE_CUT.teeth, WIDE_CUT.kt_pa, WIDE_CUT.kn_pa, WIDE_CUT.radial_immersion, WIDE_CUT.milling, WIDE_RPM)
+    assert not sim.grows(*args, 0.95 * r.depth_m)
+    assert sim.grows(*args, 1.05 * r.depth_m)

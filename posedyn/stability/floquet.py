@@ -827,6 +827,28 @@ def ladder_islands(char, a0: float, coef: np.ndarray, bound: float, depth: float
     return island, spans, inside
 
 
+#: Hopf islands (a pair of complex multipliers outside the circle between two depths below the
+#: answer, inside again up to it) are looked for by the winding count at these fractions of the
+#: verified depth as well (`hopf_rung`): an island that holds any of them is found. Seen in the
+#: blind search: 0.50-0.80 and 0.55-0.85 of the answer (uncoupled), 0.60-0.73 and 0.67-0.75
+#: (absorber poses); every one holds 0.63 or 0.71.
+HOPF_RUNGS = (0.5, 0.63, 0.71, 0.8)
+
+
+def hopf_rung(char, a0: float, coef: np.ndarray, bound: float, tau: float, extra=()):
+    """The lowest of HOPF_RUNGS x a0 at which the winding count is not shown to be 0, None where
+    every rung counts 0. The counts read h on the interpolant of the count at a0
+    (`unstable_count(polynomial=...)`, `_interpolated_sample`: no exponential), with the same
+    Rouche check per sample; where that fails, on M itself (`unstable_count` at each rung)."""
+    th = _count_thetas(char, tau, VERIFY_POINTS, extra)
+    try:  # every rung on one grid
+        count, resolved, _ = _winding(functools.partial(_interpolated_sample, coef, bound, scales=HOPF_RUNGS), th, 4096)
+    except _Unsafe:
+        count, resolved = (np.array(x) for x in zip(*(unstable_count(char, s * a0, tau, extra=extra)[:2] for s in HOPF_RUNGS)))
+    shown = (count > 0) | ~resolved
+    return float(HOPF_RUNGS[int(np.argmax(shown))] * a0) if shown.any() else None
+
+
 def _sign_change(a: np.ndarray, M: np.ndarray):
     """(changed, where) along increasing depths a: whether the sign of det(I + M(2 a)) changes
     (points with a non-finite M skipped) and the geometric middle of the first bracket (NaN)."""
@@ -1134,16 +1156,7 @@ def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int
     check; after that the count samples M directly. `polynomial` (a list): the interpolant the
     count used, (Taylor coefficients in nu, Frobenius bound of its error on |nu| <= 1), is
     appended to it (`ladder_islands` reuses it below a)."""
-    th = np.linspace(0.0, np.pi, VERIFY_POINTS if start is None else start)
-    # the free multipliers' angles always: lightly damped robot modes put several zeros of h
-    # within 1e-3 of the circle inside one step of the uniform grid, and their half turns of
-    # phase add up to a whole one that the step test cannot see (seen: count 2, 'resolved', at
-    # a twentieth of a depth the independent simulation shows stable)
-    extra = np.concatenate([np.asarray(extra, dtype=float).reshape(-1), char.free_eig()[0].imag * tau])
-    extra = np.mod(extra, 2.0 * np.pi)
-    extra = np.where(extra > np.pi, 2.0 * np.pi - extra, extra)
-    if len(extra):
-        th = np.unique(np.concatenate([th, extra]))
+    th = _count_thetas(char, tau, VERIFY_POINTS if start is None else start, extra)
     m, E = SUBSTEP_NODES[0], None
     while m <= SUBSTEP_NODES[1]:
         E = segment_samples(char, a, tau, m, E)
@@ -1172,19 +1185,39 @@ def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int
     return _winding(direct, th, max_points)
 
 
-def _interpolated_sample(coef: np.ndarray, bound: float, t: np.ndarray):
-    """(phase, ln |h|) of h(nu) = det(I - nu M) on the polynomial M(nu) = sum coef_k nu^k at
-    nu = exp(-i t); raises _Unsafe where sqrt(2n) |(I - nu M)^-1|_F x bound (M's Frobenius error)
-    reaches INTERP_SAFE (`unstable_count`)."""
+def _count_thetas(char, tau: float, points: int, extra=()) -> np.ndarray:
+    """The winding count's initial thetas: `points` uniform in [0, pi], the `extra` ones and
+    the free multipliers' angles, folded to [0, pi]. The free angles always: lightly damped
+    robot modes put several zeros of h within 1e-3 of the circle inside one step of the uniform
+    grid, and their half turns of phase add up to a whole one that the step test cannot see
+    (seen: count 2, 'resolved', at a twentieth of a depth the independent simulation shows
+    stable)."""
+    th = np.linspace(0.0, np.pi, points)
+    extra = np.concatenate([np.asarray(extra, dtype=float).reshape(-1), char.free_eig()[0].imag * tau])
+    extra = np.mod(extra, 2.0 * np.pi)
+    extra = np.where(extra > np.pi, 2.0 * np.pi - extra, extra)
+    return np.unique(np.concatenate([th, extra])) if len(extra) else th
+
+
+def _interpolated_sample(coef: np.ndarray, bound: float, t: np.ndarray, scales=None):
+    """(phase, ln |h|) of h(nu) = det(I - nu M) at nu = exp(-i t) on the polynomial
+    P(x) = sum coef_k x^k of M(a (1 - x)) (the interpolant of a count at depth a); raises _Unsafe
+    where sqrt(2n) |(I - nu M)^-1|_F x bound (M's Frobenius error) reaches INTERP_SAFE
+    (`unstable_count`). `scales`: h at each of these fractions of a instead, one lane each
+    ((lanes, len(t)) arrays): M(s a (1 - nu)) = P(1 - s (1 - nu)), and 1 - s (1 - nu) lies in the
+    disk where P's bound holds for s in [0, 1]."""
     n2 = coef.shape[-1]
     nu = np.exp(-1j * t)
-    D = np.eye(n2) - nu[:, None, None] * _polynomial_matrices(coef, nu)
+    x = nu if scales is None else (1.0 - np.asarray(scales, dtype=float)[:, None] * (1.0 - nu)).reshape(-1)
+    D = np.eye(n2) - np.resize(nu, len(x))[:, None, None] * _polynomial_matrices(coef, x)
     with np.errstate(all="ignore"):
         sign, logdet = np.linalg.slogdet(D)
         limit = INTERP_SAFE / (np.sqrt(n2) * np.float64(bound))  # inf for an exact interpolant
     if not np.all(_inverse_norms_below(D, logdet, limit)):
         raise _Unsafe
-    return np.angle(sign), logdet
+    if scales is None:
+        return np.angle(sign), logdet
+    return np.angle(sign).reshape(len(scales), -1), logdet.reshape(len(scales), -1)
 
 
 def _inverse_norms_below(D: np.ndarray, logdet: np.ndarray, limit: float) -> np.ndarray:
@@ -1218,36 +1251,32 @@ class _Unsafe(Exception):
     """The interpolated characteristic is not accurate enough for a winding count."""
 
 
-def _winding(sample, th, max_points, known=None):
-    """The argument-principle count of `unstable_count` from sample(theta) -> (phase, ln |h|)."""
+def _winding(sample, th, max_points):
+    """The argument-principle count of `unstable_count` from sample(theta) -> (phase, ln |h|).
+    A sampler that returns (lanes, thetas) arrays counts several characteristics on one grid,
+    refined wherever any lane is rough: then (counts, resolved, theta) are arrays per lane."""
     ph, lm = sample(th) if len(th) else (np.zeros(0), np.zeros(0))
-    if known is not None:
-        th, ph, lm = (np.concatenate([x, y]) for x, y in zip(known, (th, ph, lm)))
-        order = np.argsort(th)
-        th, ph, lm = th[order], ph[order], lm[order]
-    resolved = False
+    lanes = np.ndim(ph) == 2
+    ph, lm = np.atleast_2d(ph), np.atleast_2d(lm)
     while True:
-        d = np.angle(np.exp(1j * np.diff(ph)))
-        rough = (np.abs(d) > np.pi / 4) | (np.abs(np.diff(lm)) > np.log(4.0)) | ~np.isfinite(d)
-        if not rough.any():
-            resolved = True
-            break
-        if len(th) + rough.sum() > max_points:
+        d = np.angle(np.exp(1j * np.diff(ph, axis=1)))
+        rough_lane = (np.abs(d) > np.pi / 4) | (np.abs(np.diff(lm, axis=1)) > np.log(4.0)) | ~np.isfinite(d)
+        rough = rough_lane.any(axis=0)
+        if not rough.any() or len(th) + rough.sum() > max_points:
             break
         mid = 0.5 * (th[:-1] + th[1:])[rough]
-        pm, lmm = sample(mid)
+        pm, lmm = (np.atleast_2d(x) for x in sample(mid))
         th = np.concatenate([th, mid])
-        ph = np.concatenate([ph, pm])
-        lm = np.concatenate([lm, lmm])
         order = np.argsort(th)
-        th, ph, lm = th[order], ph[order], lm[order]
-    d = np.angle(np.exp(1j * np.diff(ph)))
-    if not np.all(np.isfinite(d)):  # an overflowing characteristic: no count
-        return 0, False, float("nan")
-    count = int(np.rint(-d.sum() / np.pi))
-    return count, resolved, float(th[np.argmin(lm)])
-
-
+        th, ph, lm = th[order], np.concatenate([ph, pm], axis=1)[:, order], np.concatenate([lm, lmm], axis=1)[:, order]
+    resolved = ~rough_lane.any(axis=1)
+    finite = np.all(np.isfinite(d), axis=1)  # an overflowing characteristic: no count
+    count = np.where(finite, np.rint(-np.where(np.isfinite(d), d, 0.0).sum(axis=1) / np.pi), 0).astype(int)
+    theta = np.where(finite, th[np.argmin(lm, axis=1)], np.nan)
+    resolved &= finite
+    if lanes:
+        return count, resolved, theta
+    return int(count[0]), bool(resolved[0]), float(theta[0])
 
 
 # --- chatter frequency --------------------------------------------------------------------------
@@ -1717,6 +1746,17 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
     return results
 
 
+def _verify_count(char, a: float, tau: float, thetas):
+    """(count, resolved, rung, ladder) of the verification at depth a on the coarse cut model:
+    the winding count (`unstable_count`, the boundary points' thetas sampled), the Hopf rung
+    below where it is 0 (`hopf_rung`; None: none counts) and its interpolant for the flip ladder
+    ((a, coefficients, bound) for `ladder_islands`; None where the count sampled M directly)."""
+    poly: list = []
+    count, resolved, _ = unstable_count(char, a, tau, extra=thetas, polynomial=poly)
+    rung = hopf_rung(char, a, *poly[0], tau, thetas) if poly and count == 0 and resolved else None
+    return count, resolved, rung, ((a,) + poly[0] if poly else None)
+
+
 def _fold(theta: float) -> float:
     """theta folded to [0, pi] (a boundary point and its conjugate are one)."""
     theta = float(np.mod(theta, 2.0 * np.pi))
@@ -1828,28 +1868,23 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
             mine = np.flatnonzero(ej == j)
             top = ea[mine].min() if len(mine) else np.inf
             if len(mine):
-                poly: list = []
-                count, resolved, _ = unstable_count(c0, VERIFY_FRACTION * top, tau, extra=et[mine], polynomial=poly)
-                if poly:
-                    ladders[j] = (VERIFY_FRACTION * top,) + poly[0]
+                count, resolved, rung, ladder = _verify_count(c0, VERIFY_FRACTION * top, tau, et[mine])
             else:
-                count, resolved = 1, True
-            if (count > 0 or not resolved) and hinted[j]:
+                count, resolved, rung, ladder = 1, True, None, None
+            if (count > 0 or not resolved or rung is not None) and hinted[j]:
                 retry[j] = True
                 continue
-            if count > 0 or not resolved:
-                extra = _repair(c0, tau, top)
+            if count > 0 or not resolved or rung is not None:  # a lower branch (below a Hopf rung's depth where one counts)
+                extra = _repair(c0, tau, top if rung is None else rung / VERIFY_FRACTION)
                 if extra is not None:
                     repaired[j] = True
                     add_j.append(j)
                     add_a.append(extra[0])
                     add_t.append(extra[1])
-                    poly = []
-                    count, resolved, _ = unstable_count(c0, VERIFY_FRACTION * extra[0], tau, polynomial=poly)
-                    ladders.pop(j, None)
-                    if poly:
-                        ladders[j] = (VERIFY_FRACTION * extra[0],) + poly[0]
-            verified[j] = bool(count == 0 and resolved)
+                    count, resolved, rung, ladder = _verify_count(c0, VERIFY_FRACTION * extra[0], tau, [extra[1]])
+            if ladder is not None:
+                ladders[j] = ladder
+            verified[j] = bool(count == 0 and resolved and rung is None)
         if add_j:
             ej = np.concatenate([ej, add_j])
             ea = np.concatenate([ea, add_a])
