@@ -102,7 +102,7 @@ def test_the_island_check_from_the_seed_scan_finds_the_island_below_an_answer(de
     tau = float(CUT.tooth_period_s(RPM))
     _, scans = floquet.flip_seeds(char, [scale * depth_m], [tau], [0])
     _, _, covered = floquet._islands_from_seed_scan(char, scans, [0], [depth_m], [tau])
-    island, *_ = floquet._coarse_islands(char, char, scans, [0], np.array([depth_m]), np.array([tau]), [0])
+    island, *_ = floquet._coarse_islands(lambda level: char, char, scans, [0], np.array([depth_m]), np.array([tau]), [0])
     assert covered[0]
     assert island[0] == (depth_m > 3e-3) == floquet.flip_islands(char, [depth_m], [tau])[0][0]
 

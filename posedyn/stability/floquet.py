@@ -63,9 +63,11 @@ VERIFY_FRACTION x the depth is the number of zeros of h(nu) = det(I - nu M(a (1 
 |nu| < 1 (argument principle, `unstable_count`, adaptive theta grid). Count 0 with every grid
 step resolved (< pi/4 in phase, < x4 in modulus) means no boundary point lies below 0.995 x the
 reported depth, up to the resolution of the phase sampling (a zero pair closer to the circle
-than the sampling can see is not excluded) and the coarse level's W(t) error; where the answer
-needed FINE_CHECK sub-steps per radian or more, the count is repeated at half its resolution,
-below every branch's own depth at that resolution.
+than the sampling can see is not excluded). The count runs on the cut model of the first refined
+level (where 9 in 10 sweep answers end) and, where the answer needed a finer one, once more at
+the answer's own resolution (where not 0 there, the job is solved again from the seeds at that
+resolution): a branch that a coarser model puts above the answer can lie below it with the
+answer's (blind search: 3-8 % too deep, verified on the coarse level).
 h is sampled on an interpolant (`segment_interpolants`, `circle_monodromies`,
 `monodromy_polynomial`: M(a (1 - nu)) is entire in nu, each segment's exponential needs 8-16
 Taylor terms), every sample with a Rouche bound on the interpolant's error, else directly. A
@@ -81,22 +83,24 @@ is not an interval from some depth upwards: a real multiplier can pass -1 and co
 period-doubling island), and a search that misses the lower flip point reports the depth above
 the island with a count of 0 (the sweep's absorber poses: 5.5-9.2 mm reported where the cut
 chatters from 1.7-2.2 mm). Below every verified answer the flip condition is checked first on
-the coarse cut model: on the level-0 winding count's interpolant, which holds on the whole disk
+the verification count's cut model: on that count's interpolant, which holds on the whole disk
 and so gives M(2 a) at every depth below the count's without an exponential (`ladder_islands`,
 depths 2 % apart: the sign of det(I + M(2 a))), else on the flip seeds' own scan of that model
 (`_islands_from_seed_scan`) or a scan (`flip_islands`); then, where a multiplier is below -1 or
 within FLIP_NEAR of it, at the answer's own resolution (islands appear with a finer cut model;
 after the ladder, densely where it came near -1 or found an island, `dense_flip`). Where one is found
 the job is solved again at that resolution, from the seeds and the island's lower end, and an
-answer that cannot be brought below the island is marked not verified. Hopf islands (complex multipliers)
-are not scanned for: they are found only where a seed leads to their lowest point (a band seed
+answer that cannot be brought below the island is marked not verified. Hopf islands (complex
+multipliers): the verification's count is also read at HOPF_RUNGS x the depth on the same
+interpolant (`hopf_rung`: an island that holds one of them is found and repaired below it), and
+a seed that leads to an island's lowest point finds it too (a band seed
 whose Newton fails below the job's lowest point is tried again on the whole structure: the band
 projection lost one; a coupled structure also gets HILL_SEEDS of Hill's boundary points, and
 those that reach none on the coarse cut model below an answer at a finer resolution are tried
 once more there: such an island can exist only with the finer model; all in
 tests/test_hopf_islands.py), and any converged boundary point bounds the answer from above (a
 re-solve never trades one for a higher point). A blind search over random robot-plus-spindle
-structures still finds verified answers above an island (README: 6 of 2641).
+structures finds no verified answer above an island any more (README).
 
 Continuation (`critical_depths(continuation=True)`): structures with similar modes (`modal_path`)
 start Newton on the whole structure from the boundary points the neighbours either side converged
@@ -158,14 +162,6 @@ PRUNE_ABOVE = 2.5
 PROJECT_SEEDS = True
 BAND_GAP = 4.0
 BAND_WIDEN = 3.0
-#: Where the answer needed FINE_CHECK sub-steps per radian or more (sharp force changes: one tooth,
-#: low immersion), the coarse cut model of the winding count can lack a lower branch altogether:
-#: the count is repeated at half the answer's resolution, below the branches' depths there (below
-#: the answer it counted the answer's own branch wherever the two levels differ by more than 0.5 %:
-#: 78 of 1000 sweep jobs solved again for nothing, and one 4.0 mm answer traded for 6.0 mm), and
-#: where it is not 0 the point is solved again from that resolution (seeds, count and repair
-#: there); a higher answer from there does not replace it (it is then marked not verified).
-FINE_CHECK = 4.0 * SUBSTEPS_PER_RAD
 #: Pre-asymptotic guard: a free mode whose tool-tip stiffness is at most SOFT_MODE x the cut's
 #: (depth x |(Kt, Kn)|) has its vibration resolved at the accepted level, at most
 #: SUBSTEP_PERIODS of its periods in a cutting sub-step. Below that the force average over a
@@ -741,13 +737,14 @@ def _islands_from_seed_scan(char, scans: dict, jobs, depth, tau):
     return island, near, covered
 
 
-def _coarse_islands(full, seed_char, seed_scans: dict, jobs, depth, tau, levels, ladders=None):
-    """(island, near, inside, spans) of the island check on the coarse cut model for jobs with answers at
-    `depth` (refinement `levels`): from the level-0 winding count's interpolant where the job has
-    one (`ladder_islands`; `ladders`: one (depth, coefficients, bound) or None per job), else from
-    the flip-seed scan where it covers the range (`_islands_from_seed_scan`; `seed_char` is the
-    coarse model, possibly without the irrelevant modes), else a scan of the whole structure
-    (`full`). Where the seed scan sees an island or a multiplier within FLIP_NEAR of -1 for a
+def _coarse_islands(char_at, seed_char, seed_scans: dict, jobs, depth, tau, levels, ladders=None):
+    """(island, near, inside, spans) of the island check on a coarse cut model for jobs with answers at
+    `depth` (refinement `levels`): from the verification count's interpolant where the job has
+    one (`ladder_islands`, on that count's cut model; `ladders`: one (level, depth, coefficients,
+    bound) or None per job), else from the flip-seed scan where it covers the range
+    (`_islands_from_seed_scan`; `seed_char` is the coarse model, possibly without the irrelevant
+    modes), else a scan of the whole structure at level 0 (char_at(level): the whole structure's
+    cut model at a level). Where the seed scan sees an island or a multiplier within FLIP_NEAR of -1 for a
     level-0 answer, a refined scan of the whole structure decides (the seed scan samples other
     depths: a narrow island can fall between its points and not between the refined scan's).
     inside: the bracket of the coarse model's island's lower end (`ladder_islands`; NaN where
@@ -760,7 +757,7 @@ def _coarse_islands(full, seed_char, seed_scans: dict, jobs, depth, tau, levels,
     laddered = np.array([x is not None for x in ladders], bool)
     spans = [None] * len(depth)
     for q in np.flatnonzero(laddered):
-        hit[q], spans[q], inside[q] = ladder_islands(full, *ladders[q], depth[q], tau[q])
+        hit[q], spans[q], inside[q] = ladder_islands(char_at(ladders[q][0]), *ladders[q][1:], depth[q], tau[q])
         near[q] = bool(spans[q])
     rest = np.flatnonzero(~laddered)
     if not len(rest):
@@ -768,10 +765,10 @@ def _coarse_islands(full, seed_char, seed_scans: dict, jobs, depth, tau, levels,
     h, n, covered = _islands_from_seed_scan(seed_char, seed_scans, [jobs[q] for q in rest], depth[rest], tau[rest])
     hit[rest], near[rest] = h, n
     if not covered.all():
-        hit[rest[~covered]], near[rest[~covered]] = flip_islands(full, depth[rest[~covered]], tau[rest[~covered]], refine=False)
+        hit[rest[~covered]], near[rest[~covered]] = flip_islands(char_at(0), depth[rest[~covered]], tau[rest[~covered]], refine=False)
     again = rest[covered & (hit[rest] | near[rest]) & (np.asarray(levels)[rest] == 0)]
     if len(again):
-        hit[again], near[again] = flip_islands(full, depth[again], tau[again])
+        hit[again], near[again] = flip_islands(char_at(0), depth[again], tau[again])
     hit[rest] &= np.asarray(levels)[rest] == 0  # a scan this sparse decides at level 0 only
     return hit, near, inside, spans
 
@@ -1681,8 +1678,8 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
         redo = _solve([dyns[jobs[j][0]]], cut, rpm[[jobs[j][1]]], rel_tol, substeps, True, True, branch_families, hints=hints, frequencies=frequencies)[0][0]
         points[j] = redo if redo.depth_m < p.depth_m else dataclasses.replace(p, verified=False)
 
-    for j in np.flatnonzero(missed):  # a lower branch at half the answer's resolution: from the seeds there
-        solve_lower(j, points[j].substeps_per_rad / 2.0)
+    for j in np.flatnonzero(missed):  # a lower branch at the answer's resolution: from the seeds there
+        solve_lower(j, points[j].substeps_per_rad)
         ladders.pop(j, None)
     # period-doubling islands below the answer, at the answer's own resolution (scanned there
     # where the coarse cut model shows one or comes near): where one is, the job is solved
@@ -1696,10 +1693,11 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
         group = np.array(group)
         levels = np.array([_level(points[j].substeps_per_rad, base) for j in group])
         depths, taus = np.array([points[j].depth_m for j in group]), tau_all[[jobs[j][1] for j in group]]
-        hit, near, inside, spans = _coarse_islands(char(s, 0, True), char(s, seed_level), seed_scans if seed_level == 0 else {}, group, depths, taus, levels,
-                                                   [ladders.get(j) for j in group])
-        for level in np.unique(levels[(hit | near) & (levels > 0)]):
-            sub = np.flatnonzero((hit | near) & (levels == level))
+        hit, near, inside, spans = _coarse_islands(functools.partial(char, s, full=True), char(s, seed_level), seed_scans if seed_level == 0 else {}, group, depths, taus,
+                                                   levels, [ladders.get(j) for j in group])
+        seen = np.array([ladders[j][0] if j in ladders else 0 for j in group])  # the level the check looked at
+        for level in np.unique(levels[(hit | near) & (levels > seen)]):
+            sub = np.flatnonzero((hit | near) & (levels == level) & (levels > seen))
             fine = char(s, int(level), True)
             whole = np.array([q for q in sub if spans[q] is None], int)
             if len(whole):
@@ -1794,18 +1792,19 @@ def _batched_step(char, keeps, level, a, t, tau, owner, Gc, vec, full=False):
 
 def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol, verify, seed_level, branch_families=True, hinted=None, frequencies=True):
     """From the converged seed-search points of every job: band candidates re-solved on the whole
-    structure, near ties (NEAR_TIE) brought to level 0, verified there (winding count, job by
-    job), refined in resolution until the error estimate is below rel_tol / 2, put back on the
-    full structure (irrelevant modes), chatter frequency. Newton steps batched over jobs. A
-    `hinted` job is always verified; where its count is not 0 its point is None (the caller
-    solves it again from the seeds). Also returns the jobs the half-resolution count rejects and
-    each verified job's level-0 count interpolant ({job: (depth, coefficients, bound)})."""
+    structure, near ties (NEAR_TIE) brought to level 0 and one level up, verified there (winding
+    count and Hopf rungs, job by job; `_verify_count`, `_repair`), refined in resolution until
+    the error estimate is below rel_tol / 2, put back on the full structure (irrelevant modes),
+    chatter frequency. Newton steps batched over jobs. A `hinted` job is always verified; where
+    its count is not 0 its point is None (the caller solves it again from the seeds). Also
+    returns the jobs whose count at the answer's own (finer) resolution is not 0 and each
+    verified job's count interpolant ({job: (level, depth, coefficients, bound)})."""
     hinted = np.zeros(len(jobs), bool) if hinted is None else hinted
     retry = np.zeros(len(jobs), bool)
     J = len(jobs)
     repaired = np.zeros(J, bool)
     verified = [None] * J
-    ladders: dict = {}  # job -> (depth, its level-0 count's interpolant): `ladder_islands`
+    ladders: dict = {}  # job -> (level, depth, its verification count's interpolant): `ladder_islands`
     # near ties at the seed level (band searches: twice as wide), flattened
     ej, ea, et, ev, eg, ep = [], [], [], [], [], []
     for j, (ca, ct, cv, cg, cp) in enumerate(cands):
@@ -1858,61 +1857,30 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
     while level < 0 and len(ej):
         ea, et, _, Gc, vec = _batched_step(char, keeps, level, ea, et, etau, owner, Gc, vec)
         level += 1
-    if verify or hinted.any():
-        add_j, add_a, add_t = [], [], []
-        for j, (s, e) in enumerate(jobs):
-            if not (verify or hinted[j]):
-                continue
-            tau = tau_all[e]
-            c0 = char(s, 0, True)
-            mine = np.flatnonzero(ej == j)
-            top = ea[mine].min() if len(mine) else np.inf
-            if len(mine):
-                count, resolved, rung, ladder = _verify_count(c0, VERIFY_FRACTION * top, tau, et[mine])
-            else:
-                count, resolved, rung, ladder = 1, True, None, None
-            if (count > 0 or not resolved or rung is not None) and hinted[j]:
-                retry[j] = True
-                continue
-            if count > 0 or not resolved or rung is not None:  # a lower branch (below a Hopf rung's depth where one counts)
-                extra = _repair(c0, tau, top if rung is None else rung / VERIFY_FRACTION)
-                if extra is not None:
-                    repaired[j] = True
-                    add_j.append(j)
-                    add_a.append(extra[0])
-                    add_t.append(extra[1])
-                    count, resolved, rung, ladder = _verify_count(c0, VERIFY_FRACTION * extra[0], tau, [extra[1]])
-            if ladder is not None:
-                ladders[j] = ladder
-            verified[j] = bool(count == 0 and resolved and rung is None)
-        if add_j:
-            ej = np.concatenate([ej, add_j])
-            ea = np.concatenate([ea, add_a])
-            et = np.concatenate([et, add_t])
-            owner = np.array([jobs[j][0] for j in ej], int)
-            etau = np.array([tau_all[jobs[j][1]] for j in ej], float)
-            Gc = np.concatenate([Gc, np.zeros(len(add_j), complex)])
-            vec = None if vec is None else list(vec) + [None] * len(add_j)
-    # near ties at level 0
-    keep_el = np.ones(len(ej), bool)
-    for j in range(J):
-        mine = np.flatnonzero(ej == j)
-        if len(mine):
-            keep_el[mine] = (ea[mine] <= ea[mine].min() * (1.0 + NEAR_TIE)) & ~retry[j]
-    sel = np.flatnonzero(keep_el)
-    ej, ea, et, owner, etau, Gc = ej[sel], ea[sel], et[sel], owner[sel], etau[sel], Gc[sel]
-    vec = None if vec is None else [vec[i] for i in sel]
     err = np.full(len(ej), np.inf)
-    ea_half = ea.copy()  # every branch one level below its last (the fine check counts below these)
     conv_job = np.zeros(J, bool)
     level_job = np.zeros(J, int)
     active = np.ones(len(ej), bool)
-    while base * 2.0 ** (level + 1) <= MAX_SUBSTEPS_PER_RAD and active.any():
+
+    def keep_only(sel):
+        nonlocal ej, ea, et, owner, etau, Gc, vec, err, active
+        ej, ea, et, owner, etau, Gc, err, active = (x[sel] for x in (ej, ea, et, owner, etau, Gc, err, active))
+        vec = None if vec is None else [vec[i] for i in sel]
+
+    def near_ties():  # every job's points within NEAR_TIE of its lowest, none of a job to retry
+        keep_el = np.ones(len(ej), bool)
+        for j in range(J):
+            mine = np.flatnonzero(ej == j)
+            if len(mine):
+                keep_el[mine] = (ea[mine] <= ea[mine].min() * (1.0 + NEAR_TIE)) & ~retry[j]
+        keep_only(np.flatnonzero(keep_el))
+
+    def refine():  # the active points one level up; a job converges where its lowest (and near) points moved by less than rel_tol / 2
+        nonlocal level, vec
         idx = np.flatnonzero(active)
         v_in = None if vec is None else [vec[i] for i in idx]
         an, tn, ok, gn, vn = _batched_step(char, keeps, level, ea[idx], et[idx], etau[idx], owner[idx], Gc[idx], v_in)
         err[idx] = np.where(ok, np.abs(an - ea[idx]) / an, np.inf)
-        ea_half[idx] = ea[idx]
         ea[idx], et[idx], Gc[idx] = an, tn, gn
         if vec is None:
             vec = [None] * len(ej)
@@ -1927,6 +1895,58 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
             if err[b] <= 0.5 * rel_tol and np.all(err[close] <= 0.5 * rel_tol) and not char(jobs[j][0], level, True).unresolved(ea[b], tau_all[jobs[j][1]]):
                 conv_job[j] = True
                 active[mine] = False
+
+    near_ties()
+    if base * 2.0 ** (level + 2) <= MAX_SUBSTEPS_PER_RAD and len(ej):
+        refine()
+    # verified at the first refined level (where 9 in 10 sweep answers end; a lower branch at
+    # the answer's own cut model that the coarse one puts above it is missed by a count there:
+    # seen 3-8 % too deep in the blind search), lower branches repaired there (at the coarse
+    # level where no level above the first is left to estimate a repaired point's error)
+    vlevel = level
+    if verify or hinted.any():
+        add_j, add_a, add_t = [], [], []
+        for j, (s, e) in enumerate(jobs):
+            if not (verify or hinted[j]):
+                continue
+            tau = tau_all[e]
+            cv = char(s, vlevel, True)
+            mine = np.flatnonzero(ej == j)
+            top = ea[mine].min() if len(mine) else np.inf
+            if len(mine):
+                count, resolved, rung, ladder = _verify_count(cv, VERIFY_FRACTION * top, tau, et[mine])
+            else:
+                count, resolved, rung, ladder = 1, True, None, None
+            if (count > 0 or not resolved or rung is not None) and hinted[j]:
+                retry[j] = True
+                continue
+            if count > 0 or not resolved or rung is not None:  # a lower branch (below a Hopf rung's depth where one counts)
+                extra = _repair(cv, tau, top if rung is None else rung / VERIFY_FRACTION)
+                if extra is not None:
+                    repaired[j] = True
+                    add_j.append(j)
+                    add_a.append(extra[0])
+                    add_t.append(extra[1])
+                    count, resolved, rung, ladder = _verify_count(cv, VERIFY_FRACTION * extra[0], tau, [extra[1]])
+                    conv_job[j] = False
+                    active[mine] = True
+            if ladder is not None:
+                ladders[j] = (vlevel,) + ladder
+            verified[j] = bool(count == 0 and resolved and rung is None)
+        if add_j:
+            n_add = len(add_j)
+            ej = np.concatenate([ej, add_j])
+            ea = np.concatenate([ea, add_a])
+            et = np.concatenate([et, add_t])
+            owner = np.array([jobs[j][0] for j in ej], int)
+            etau = np.array([tau_all[jobs[j][1]] for j in ej], float)
+            Gc = np.concatenate([Gc, np.zeros(n_add, complex)])
+            err = np.concatenate([err, np.full(n_add, np.inf)])
+            active = np.concatenate([active, np.ones(n_add, bool)])
+            vec = None if vec is None else list(vec) + [None] * n_add
+        near_ties()
+    while base * 2.0 ** (level + 1) <= MAX_SUBSTEPS_PER_RAD and active.any():
+        refine()
     # the irrelevant modes back in, same resolution
     back = np.flatnonzero([len(keeps[o]) < dyns[o].n_modes for o in owner])
     if len(back):
@@ -1947,16 +1967,15 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
             a_f, t_f, ok, _, _ = _newton(batch, ea[ii], et[ii], etau[ii], tol=REFINE_TOL, Gc=Gc[ii], vec=np.array([full_vec[k] for k in sb]))
             ea[ii] = np.where(ok, a_f, ea[ii])
             et[ii] = np.where(ok, np.where(t_f > np.pi, 2 * np.pi - t_f, t_f), et[ii])
-    # the count at half the answer's resolution where it needed a fine cut model (FINE_CHECK),
-    # below every branch's depth at that resolution: not 0 means a lower branch there that the
-    # search missed (the caller solves the job again from that resolution)
+    # the count again at the answer's own resolution where that is finer than the verification's:
+    # not 0 means a lower branch there that the search missed (the caller solves the job again at
+    # that resolution)
     missed = np.zeros(J, bool)
     for j, (s, e) in enumerate(jobs):
         mine = np.flatnonzero(ej == j)
         lv = int(level_job[j])
-        if len(mine) and (verify or hinted[j]) and not retry[j] and base * 2.0**lv >= FINE_CHECK and lv >= 2:
-            below = VERIFY_FRACTION * min(ea[mine].min(), ea_half[mine].min())
-            count, resolved, _ = unstable_count(char(s, lv - 1, True), below, tau_all[e], extra=et[mine])
+        if len(mine) and (verify or hinted[j]) and not retry[j] and lv > vlevel:
+            count, resolved, _ = unstable_count(char(s, lv, True), VERIFY_FRACTION * ea[mine].min(), tau_all[e], extra=et[mine])
             missed[j] = not (count == 0 and resolved)
     # chatter frequencies, batched per (structure, resolution)
     wanted: dict = {}
