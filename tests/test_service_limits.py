@@ -93,16 +93,18 @@ def test_a_single_query_does_not_wait_behind_a_plan(service):
     plan's remaining poses (singles and plan poses have separate lanes, singles first)."""
     svc, endpoint, _ = service
     poses = [{"pose_id": f"lane{i}", "x_mm": 1402.0 + 1.5 * i, "y_mm": 0.0, "z_mm": 800.0, "beta_deg": 0.0} for i in range(20)]
-    with ScheduleClient("cell3", connect=[endpoint], timeout_s=30) as c:
+    # the deadlines only keep a broken service from hanging the suite: what is asserted is the
+    # order (the single is answered while the plan is still pending), not how long either takes
+    with ScheduleClient("cell3", connect=[endpoint], timeout_s=600) as c:
         c.session.put("cells/cell3/posedyn/plan/lanes", json.dumps({"poses": poses}))
-        deadline = time.monotonic() + 30
+        deadline = time.monotonic() + 600
         while svc.status()["computing"] == 0 or svc.status()["plans_pending"] == 0:
             assert time.monotonic() < deadline
             time.sleep(0.01)
         entry = c.schedule({"pose_id": "single", "x_mm": 1395.5, "y_mm": 0.0, "z_mm": 800.0, "beta_deg": 0.0})
         assert entry["pose_id"] == "single"
         assert svc.status()["plans_pending"] == 1  # the plan is still being computed
-        plan = c.plan("lanes", poses, timeout_s=120)  # busy while pending: retried until it is done
+        plan = c.plan("lanes", poses, timeout_s=600)  # busy while pending: retried until it is done
     assert [e["pose_id"] for e in plan["entries"]] == [p["pose_id"] for p in poses]
 
 
