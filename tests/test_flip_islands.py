@@ -60,8 +60,11 @@ def flip_multipliers(depth_m: float) -> np.ndarray:
         return A
 
     t_in, t_out = st / omega, ex / omega  # tooth 0 cuts from st to ex; the other teeth are a tooth period apart
-    flow = scipy.integrate.solve_ivp(lambda t, y: (generator(t) @ y.reshape(2 * n, 2 * n)).ravel(), (t_in, t_out), np.eye(2 * n).ravel(),
-                                     method="DOP853", rtol=1e-10, atol=1e-12).y[:, -1].reshape(2 * n, 2 * n)
+    inner = 1e-9 * (t_out - t_in)  # the force jumps at entry and exit: inside the cut it is the cut's
+    solution = scipy.integrate.solve_ivp(lambda t, y: (generator(min(max(t, t_in + inner), t_out - inner)) @ y.reshape(2 * n, 2 * n)).ravel(), (t_in, t_out),
+                                         np.eye(2 * n).ravel(), method="DOP853", rtol=1e-10, atol=1e-12)
+    assert solution.success, solution.message
+    flow = solution.y[:, -1].reshape(2 * n, 2 * n)
     free = generator(0.5 * (t_out + tau + t_in))  # no tooth in the cut
     assert not np.any(free[n:, :n] + K)
     period = scipy.linalg.expm(free * (tau - (t_out - t_in))) @ flow

@@ -1745,7 +1745,7 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
 
 
 def _verify_count(char, a: float, tau: float, thetas):
-    """(count, resolved, rung, ladder) of the verification at depth a on the coarse cut model:
+    """(count, resolved, rung, ladder) of the verification at depth a on `char`'s cut model:
     the winding count (`unstable_count`, the boundary points' thetas sampled), the Hopf rung
     below where it is 0 (`hopf_rung`; None: none counts) and its interpolant for the flip ladder
     ((a, coefficients, bound) for `ladder_islands`; None where the count sampled M directly)."""
@@ -2180,6 +2180,9 @@ def _bisect_repair(char, tau, a_top):
     # count at 0.995 x the point verifies it)
     a_r, t_r = _newton_from_nearest(char, tau, hi, BISECT_POINTS, DESCENT_STARTS)
     fit = a_r <= hi * (1.0 + REPAIR_SLACK)
+    if not fit.any():  # the crossing's multiplier is not among the nearest few (seen: the 5th, absorber pose): from every local minimum
+        a_r, t_r = _newton_from_nearest(char, tau, hi, BISECT_POINTS, BISECT_POINTS)
+        fit = a_r <= hi * (1.0 + REPAIR_SLACK)
     if not fit.any() and trusted:  # e.g. two multipliers nearly equal (x and y spindle modes 0.3 % apart): on the determinant
         a_r, t_r = _newton_on_determinant(char, tau, hi, BISECT_POINTS, DESCENT_STARTS)
         fit = (a_r <= hi * (1.0 + REPAIR_SLACK)) & (a_r >= lo * (1.0 - REPAIR_SLACK))
