@@ -59,10 +59,17 @@ def absorber_structure(rows, absorber) -> ToolTipDynamics:
 
 
 def exact_log(dyn: ToolTipDynamics, cut: Cut, rpm: float, depth_m: float, theta: float) -> complex:
-    """ln(nu mu) for the multiplier mu of the period map nearest 1 / nu (nu = exp(-i theta)):
-    q'' + C q' + K q = c W(t) q with c = -a (1 - nu), integrated by DOP853 (rtol 1e-10) over one
-    tooth period, piece by piece between the teeth's entries and exits (several teeth may cut at
-    once), and by scipy's expm where none cuts."""
+    """ln(nu mu) for the multiplier mu of the period map (`exact_multipliers`) nearest 1 / nu."""
+    nu = np.exp(-1j * theta)
+    mu = exact_multipliers(dyn, cut, rpm, depth_m, theta)
+    return complex(np.log(nu * mu[np.argmin(np.abs(mu - 1.0 / nu))]))
+
+
+def exact_multipliers(dyn: ToolTipDynamics, cut: Cut, rpm: float, depth_m: float, theta: float) -> np.ndarray:
+    """Eigenvalues of the period map of q'' + C q' + K q = c W(t) q with c = -a (1 - nu),
+    nu = exp(-i theta), integrated by DOP853 (rtol 1e-10) over one tooth period, piece by piece
+    between the teeth's entries and exits (several teeth may cut at once), and by scipy's expm
+    where none cuts."""
     n = dyn.n_modes
     K, C = dyn.stiffness_matrix, dyn.damping_matrix
     nu = np.exp(-1j * theta)
@@ -97,8 +104,7 @@ def exact_log(dyn: ToolTipDynamics, cut: Cut, rpm: float, depth_m: float, theta:
                                          np.eye(2 * n, dtype=complex).ravel(), method="DOP853", rtol=1e-10, atol=1e-12)
         assert flow.success, flow.message
         period = flow.y[:, -1].reshape(2 * n, 2 * n) @ period
-    mu = np.linalg.eigvals(period)
-    return complex(np.log(nu * mu[np.argmin(np.abs(mu - 1.0 / nu))]))
+    return np.linalg.eigvals(period)
 
 
 def exact_boundary_point(dyn, cut, rpm, depth_m: float, theta: float, iterations: int = 4):
@@ -240,3 +246,32 @@ def test_the_repair_tries_every_multiplier_where_the_nearest_few_reach_nothing()
     assert r.verified and r.converged and r.repaired and r.depth_m < 13e-3
     (depth, theta), residual = exact_boundary_point(dyn, FIFTH_CUT, FIFTH_RPM, r.depth_m, r.theta_rad, iterations=2)
     assert residual < 1e-6 and abs(r.depth_m / depth - 1.0) < 0.02
+
+
+#: A random absorber structure of the blind search (seed 6, case 2708): 3 teeth in down milling at
+#: a/D 0.08, 10,439 rpm. A complex pair meets on the negative axis at -0.994 and splits; one
+#: real multiplier passes -1 at 3.97 mm. Newton on one eigenvalue from the top of the
+#: bisection's bracket reached nothing there, and refinement ended on a higher flip point
+#: (6.20 mm, not verified).
+SPLIT_HOST = [
+    ("x", 5.459632985714472, 0.06292582422384294, 455009.24086028), ("x", 40.428305847149666, 0.06185953700377809, 5837968.124892279),
+    ("x", 2107.4929431843693, 0.03930034757756002, 4188272.10370656), ("x", 8884.891685559614, 0.05902140883086698, 57286417.52683269),
+    ("y", 16.586215246204613, 0.011268920075337889, 2232261.1574659576), ("y", 81.17549343181349, 0.07484330724630181, 898436.4279264886),
+    ("y", 1179.8396308037268, 0.02405116349396992, 17068310.439825293), ("y", 7637.272959971531, 0.009995246526318776, 95022699.16683482),
+]
+SPLIT_ABSORBER = (2.224603639767833, 507003.94098809926, 0.05215085665356857)
+SPLIT_CUT = Cut(teeth=3, kt_pa=1878930414.5749757, kn_pa=227782739.82535964, radial_immersion=0.07706160206548808, milling="down")
+SPLIT_RPM = 10439.205006564764
+
+
+def test_a_flip_point_just_after_a_complex_pair_splits_is_found_on_the_flip_condition():
+    """Where Newton fails in the bisection's bracket and det(I + M(2 a)) changes sign there, the
+    root of that real determinant (Brent) is the boundary point. Independent: the DOP853 period
+    map at nu = -1 has every multiplier inside the circle 2 % below the reported depth and a real
+    one below -1 2 % above it."""
+    dyn = absorber_structure(SPLIT_HOST, SPLIT_ABSORBER)
+    r = floquet.critical_depth(dyn, SPLIT_CUT, SPLIT_RPM)
+    assert r.verified and r.converged and r.theta_rad == pytest.approx(np.pi, abs=1e-3)
+    below, above = (exact_multipliers(dyn, SPLIT_CUT, SPLIT_RPM, f * r.depth_m, np.pi) for f in (0.98, 1.02))
+    assert np.abs(below).max() < 1.0
+    assert np.any((np.abs(above.imag) < 1e-9) & (above.real < -1.0))
