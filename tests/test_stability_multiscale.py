@@ -220,3 +220,32 @@ def test_the_repair_bisection_treats_an_unresolved_count_as_not_stable():
     fine = floquet.critical_depth(structure(rows), cut, 13511.967513950087, substeps_per_rad=32.0)
     assert result.converged and fine.converged
     assert abs(result.depth_m / fine.depth_m - 1.0) < 0.01 and 8400 < result.chatter_hz < 8800
+
+
+#: A random uncoupled structure of the blind search (seed 5, case 1435): one tooth in up milling
+#: at a/D 0.58, 1879 rpm. With the coarse cut model (4 sub-steps a radian), where the winding count
+#: used to run, no branch lies below 1.30 mm; with the answer's model one does, at 1.19 mm.
+COARSE_BLIND_ROWS = [
+    ("x", 21.804041377957425, 0.012515157960925559, 11260645.180048384), ("x", 115.81922537559248, 0.04196461249459647, 4836300.2516709315),
+    ("x", 2394.0227950025874, 0.014606026046826944, 92717832.64574702), ("x", 7469.3529879136095, 0.04371825351675283, 16820916.927317016),
+    ("y", 11.15929141713237, 0.0419957476940165, 513070.2701030985), ("y", 92.3361985378659, 0.0591382344309436, 1732170.0001861856),
+    ("y", 1454.9650522179345, 0.03609980133348563, 28733110.95443373), ("y", 4196.3994106141145, 0.021241546424555634, 6011285.019308497),
+]
+COARSE_BLIND_CUT = Cut(teeth=1, kt_pa=765119355.2365426, kn_pa=146097921.08813053, radial_immersion=0.5776859051376391, milling="up")
+COARSE_BLIND_RPM = 1878.907369909543
+
+
+def test_a_branch_the_coarse_cut_model_puts_above_the_answer_is_found_at_the_answers_resolution():
+    """The verification count runs with the first refined cut model and again with the answer's;
+    the engine reported 1.30 mm, verified, 9 % too deep, when it ran on the coarse one. The independent time-domain simulation decays 5 % below the answer and grows 5 %
+    above it."""
+    dyn = structure(COARSE_BLIND_ROWS)
+    tau = float(COARSE_BLIND_CUT.tooth_period_s(COARSE_BLIND_RPM))
+    coarse = floquet.FloquetCharacteristic(dyn, COARSE_BLIND_CUT, floquet.SUBSTEPS_PER_RAD)
+    assert floquet.unstable_count(coarse, 1.25e-3, tau)[:2] == (0, True)  # the coarse model: nothing below 1.25 mm
+    r = floquet.critical_depth(dyn, COARSE_BLIND_CUT, COARSE_BLIND_RPM)
+    assert r.verified and r.converged and r.depth_m < 1.22e-3
+    args = (COARSE_BLIND_ROWS, COARSE_BLIND_CUT.teeth, COARSE_BLIND_CUT.kt_pa, COARSE_BLIND_CUT.kn_pa, COARSE_BLIND_CUT.radial_immersion,
+            COARSE_BLIND_CUT.milling, COARSE_BLIND_RPM)
+    assert not sim.grows(*args, 0.95 * r.depth_m)
+    assert sim.grows(*args, 1.05 * r.depth_m)
