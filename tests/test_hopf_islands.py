@@ -275,3 +275,28 @@ def test_a_flip_point_just_after_a_complex_pair_splits_is_found_on_the_flip_cond
     below, above = (exact_multipliers(dyn, SPLIT_CUT, SPLIT_RPM, f * r.depth_m, np.pi) for f in (0.98, 1.02))
     assert np.abs(below).max() < 1.0
     assert np.any((np.abs(above.imag) < 1e-9) & (above.real < -1.0))
+
+
+#: A random absorber structure of the blind search (seed 8, case 1339): 3 teeth in up milling at
+#: a/D 0.06, 917 rpm. No seed converged; the repair's doubling search stepped from 6.4 mm (stable
+#: on the coarse cut model) to 12.8 mm (stable, an island below) to 25.6 mm, its probes went down
+#: to 9.7 mm (unstable), and the bisection then started from 12.8 mm, above that: no answer at all.
+NO_SEED_HOST = [
+    ("x", 13.352144835534185, 0.05330175319294395, 912648.4837365033), ("x", 43.7958968192143, 0.015272408637895809, 374768.6034371061),
+    ("x", 554.3795908677484, 0.04604988890394385, 3168917.457361659), ("x", 5631.872106466029, 0.056961353227355356, 7180602.047305715),
+    ("y", 24.21206938436628, 0.0240792892970544, 9154556.51430362), ("y", 66.32607937588783, 0.014570224413748181, 745378.3270339412),
+    ("y", 2494.359421113129, 0.06105921556228734, 9190958.079607882), ("y", 6010.610611391484, 0.07090334537266171, 3340988.322166338),
+]
+NO_SEED_ABSORBER = (4.021247878206059, 112694.03627428255, 0.14746839384983068)
+NO_SEED_CUT = Cut(teeth=3, kt_pa=1888505315.3505561, kn_pa=542625365.3029354, radial_immersion=0.05824687901066746, milling="up")
+NO_SEED_RPM = 917.487621691842
+
+
+def test_the_repair_bisects_below_its_probes_when_every_probe_is_unstable():
+    """The bisection's floor stays below the probes' lowest unstable depth; the answer is
+    verified, converged and a boundary point of the DOP853 characteristic."""
+    dyn = absorber_structure(NO_SEED_HOST, NO_SEED_ABSORBER)
+    r = floquet.critical_depth(dyn, NO_SEED_CUT, NO_SEED_RPM)
+    assert r.verified and r.converged and r.repaired
+    (depth, theta), residual = exact_boundary_point(dyn, NO_SEED_CUT, NO_SEED_RPM, r.depth_m, r.theta_rad, iterations=2)
+    assert residual < 1e-6 and abs(r.depth_m / depth - 1.0) < 0.02

@@ -2166,7 +2166,8 @@ def _bisect_repair(char, tau, a_top):
         else:
             lo = fraction * hi
             break
-    if lo is None:
+    if lo is None:  # every probe unstable: down to the floor (the doubling's last stable depth only where still below)
+        floor = floor if floor < hi else 1e-3 * hi
         lo = 0.0 if unstable(floor) else floor
     while hi - lo > 0.01 * hi:
         mid = 0.5 * (lo + hi) if lo == 0.0 else np.sqrt(lo * hi)
