@@ -350,3 +350,10 @@ def grows(table_rows, teeth, kt_pa, kn_pa, radial_immersion, milling, rpm, depth
     """True if the regenerative vibration grows at this depth (fitted rate > 0)."""
     return analyse(table_rows, teeth, kt_pa, kn_pa, radial_immersion, milling, rpm,
                    depth_m, **kw)["sigma"] > 0.0
+
+
+def grows_either_side(table_rows, cut, rpm, depth_m, below=0.95, above=1.05):
+    """(grows at below x depth_m, grows at above x depth_m) for a cut given as any object with
+    teeth, kt_pa, kn_pa, radial_immersion and milling (plain numbers are all that is read)."""
+    args = (table_rows, cut.teeth, cut.kt_pa, cut.kn_pa, cut.radial_immersion, cut.milling, rpm)
+    return grows(*args, below * depth_m), grows(*args, above * depth_m)

@@ -41,9 +41,7 @@ def test_reported_depth_splits_growth_from_decay_in_an_independent_time_domain_s
     result = critical_points([structure(TABLE)], CUT, 2000.0)[0]
     assert result.method == "floquet" and result.converged and result.rel_error_estimate < 0.02
     assert 5400 < result.chatter_hz < 5500  # near the spindle mode that chatters
-    args = (TABLE, CUT.teeth, CUT.kt_pa, CUT.kn_pa, CUT.radial_immersion, CUT.milling, 2000.0)
-    assert not sim.grows(*args, 0.95 * result.depth_m)
-    assert sim.grows(*args, 1.05 * result.depth_m)
+    assert sim.grows_either_side(TABLE, CUT, 2000.0, result.depth_m) == (False, True)
 
 
 @pytest.mark.parametrize("rpm, depth_mm", [(1000.0, 1.868), (2000.0, 1.517), (5000.0, 1.291), (12000.0, 4.626)])
@@ -113,9 +111,7 @@ def test_a_hard_case_once_missed_is_now_found():
     rpm = 13540.495847689088
     result = critical_points([structure(rows)], cut, rpm)[0]
     assert result.converged and 31.0e-3 < result.depth_m < 32.0e-3 and result.chatter_hz == pytest.approx(4684, rel=0.01)
-    args = (rows, cut.teeth, cut.kt_pa, cut.kn_pa, cut.radial_immersion, cut.milling, rpm)
-    assert not sim.grows(*args, 0.95 * result.depth_m)
-    assert sim.grows(*args, 1.05 * result.depth_m)
+    assert sim.grows_either_side(rows, cut, rpm, result.depth_m) == (False, True)
 
 
 #: Twin poses of the gap workflow's campaigns at 800 rpm (seed 004's cut) where the seeds miss the
@@ -171,9 +167,7 @@ def test_the_repaired_depth_splits_growth_from_decay_in_the_independent_simulati
     the 9.6 kHz mode)."""
     result = critical_points([structure(R28_ROWS)], R28_CUT, R28_RPM)[0]
     assert result.converged and 14.0e-3 < result.depth_m < 15.5e-3 and 9300 < result.chatter_hz < 9600
-    args = (R28_ROWS, R28_CUT.teeth, R28_CUT.kt_pa, R28_CUT.kn_pa, R28_CUT.radial_immersion, R28_CUT.milling, R28_RPM)
-    assert not sim.grows(*args, 0.95 * result.depth_m)
-    assert sim.grows(*args, 1.05 * result.depth_m)
+    assert sim.grows_either_side(R28_ROWS, R28_CUT, R28_RPM, result.depth_m) == (False, True)
 
 
 #: The demo model's median sweep pose with seed 004's MRF absorber at 63.5 Hz (3 kg, 477.7 kN/m,
@@ -245,7 +239,4 @@ def test_a_branch_the_coarse_cut_model_puts_above_the_answer_is_found_at_the_ans
     assert floquet.unstable_count(coarse, 1.25e-3, tau)[:2] == (0, True)  # the coarse model: nothing below 1.25 mm
     r = floquet.critical_depth(dyn, COARSE_BLIND_CUT, COARSE_BLIND_RPM)
     assert r.verified and r.converged and r.depth_m < 1.22e-3
-    args = (COARSE_BLIND_ROWS, COARSE_BLIND_CUT.teeth, COARSE_BLIND_CUT.kt_pa, COARSE_BLIND_CUT.kn_pa, COARSE_BLIND_CUT.radial_immersion,
-            COARSE_BLIND_CUT.milling, COARSE_BLIND_RPM)
-    assert not sim.grows(*args, 0.95 * r.depth_m)
-    assert sim.grows(*args, 1.05 * r.depth_m)
+    assert sim.grows_either_side(COARSE_BLIND_ROWS, COARSE_BLIND_CUT, COARSE_BLIND_RPM, r.depth_m) == (False, True)

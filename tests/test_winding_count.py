@@ -86,9 +86,7 @@ def test_robot_modes_close_to_the_circle_do_not_alias_the_count():
     char = floquet.FloquetCharacteristic(dyn, ROBOT_CUT, result.substeps_per_rad)
     for fraction in (0.05, 0.5, 0.9):
         assert floquet.unstable_count(char, fraction * result.depth_m, tau)[:2] == (0, True)
-    args = (ROBOT_ROWS, ROBOT_CUT.teeth, ROBOT_CUT.kt_pa, ROBOT_CUT.kn_pa, ROBOT_CUT.radial_immersion, ROBOT_CUT.milling, rpm)
-    assert not sim.grows(*args, 0.9 * result.depth_m)
-    assert sim.grows(*args, 1.05 * result.depth_m)
+    assert sim.grows_either_side(ROBOT_ROWS, ROBOT_CUT, rpm, result.depth_m, below=0.9) == (False, True)
 
 
 def test_the_inverse_norm_screen_agrees_with_the_inverse():
