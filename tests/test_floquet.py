@@ -165,3 +165,6 @@ def test_batched_exponential_matches_scipy_across_norms_and_sizes(dtype):
         want = np.array([scipy.linalg.expm(a) for a in A])
         assert got.dtype == A.dtype
         assert np.max(np.abs(got - want)) <= 1e-12 * max(np.max(np.abs(want)), 1.0)
+        buffer = np.full(A.shape, np.nan, dtype=A.dtype)  # written in place, block by block
+        assert sdm.expm_batched(A, out=buffer) is buffer
+        assert np.array_equal(buffer, got)

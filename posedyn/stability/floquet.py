@@ -371,12 +371,16 @@ class FloquetCharacteristic:
         substep = tau * (self.fraction[self.cutting].max() if self.cutting.any() else 0.0)
         return bool(np.any(soft & (np.abs(lam.imag) / (2.0 * np.pi) * substep > SUBSTEP_PERIODS)))
 
-    def generators(self, c: np.ndarray) -> np.ndarray:
-        """A_i(c) for every segment, (s, B, 2n, 2n), real for real c (balanced coordinates)."""
+    def generators(self, c: np.ndarray, dt: np.ndarray | None = None, segments=slice(None)) -> np.ndarray:
+        """A_i(c) dt_i for the `segments` (all), (s, B, 2n, 2n), real for real c (balanced
+        coordinates); dt (s, B) the segments' lengths (1: the generators themselves)."""
         n = self.n
         c = _complex_or_real(c)
-        A = np.broadcast_to(self.A0, (len(self.fraction), len(c), 2 * n, 2 * n)).astype(c.dtype)
-        A[:, :, n:, :n] -= c[None, :, None, None] * self.W[:, None] / self.scale[None, None, None, :]
+        W = self.W[segments] / self.scale[None, None, :]
+        dt = np.ones((len(W), len(c))) if dt is None else dt
+        A = np.empty((len(W), len(c), 2 * n, 2 * n), dtype=c.dtype)
+        np.multiply(self.A0, dt[:, :, None, None], out=A)
+        A[:, :, n:, :n] -= (c[None, :] * dt)[:, :, None, None] * W[:, None]
         return A
 
     def monodromy(self, c: np.ndarray, tau: np.ndarray) -> np.ndarray:
@@ -393,9 +397,12 @@ class FloquetCharacteristic:
         tau = np.broadcast_to(np.asarray(tau, dtype=float).reshape(-1), c.shape)
         n2 = 2 * self.n
         cut_idx = np.flatnonzero(self.cutting)
-        A = self.generators(c)[cut_idx] * (self.fraction[cut_idx, None] * tau[None, :])[:, :, None, None]
+        A = self.generators(c, self.fraction[cut_idx, None] * tau[None, :], cut_idx)
         E = np.empty((len(self.fraction), len(c), n2, n2), dtype=c.dtype)
-        E[cut_idx] = sdm.expm_batched(A.reshape(-1, n2, n2)).reshape(len(cut_idx), len(c), n2, n2)
+        if len(cut_idx) and cut_idx[-1] - cut_idx[0] == len(cut_idx) - 1:  # one run: in place (a leading-axis slice is a view)
+            sdm.expm_batched(A.reshape(-1, n2, n2), out=E[cut_idx[0] : cut_idx[-1] + 1].reshape(-1, n2, n2))
+        else:
+            E[cut_idx] = sdm.expm_batched(A.reshape(-1, n2, n2)).reshape(len(cut_idx), len(c), n2, n2)
         free_idx = np.flatnonzero(~self.cutting)
         if len(free_idx):  # independent of c: once per distinct delay
             utau, inverse = np.unique(tau, return_inverse=True)
@@ -1106,11 +1113,11 @@ def circle_monodromies(coef: np.ndarray, error: np.ndarray, N: int):
     after = np.ones((len(En), len(nu)))  # |E_S ... E_(s+1)|_F
     M = En[0]
     for i in range(1, len(En)):
-        before[i] = np.linalg.norm(M, axis=(1, 2))
+        before[i] = np.sqrt(_frobenius2(M))
         M = En[i] @ M
     Q = En[-1]
     for i in range(len(En) - 2, -1, -1):
-        after[i] = np.linalg.norm(Q, axis=(1, 2))
+        after[i] = np.sqrt(_frobenius2(Q))
         Q = Q @ En[i]
     with np.errstate(all="ignore"):
         bound = float((En.shape[-1] * error[:, None] * before * after).sum(axis=0).max())
@@ -1225,7 +1232,7 @@ def _inverse_norms_below(D: np.ndarray, logdet: np.ndarray, limit: float) -> np.
     every sample away from a zero of det D without an inverse; the inverse for the rest."""
     m = D.shape[-1]
     with np.errstate(all="ignore"):
-        fro2 = np.einsum("bij,bij->b", D.conj(), D).real
+        fro2 = _frobenius2(D)
         log_bound = 0.5 * np.log(m) + 0.5 * (m - 1) * np.log(fro2 / (m - 1)) - logdet
         below = log_bound < np.log(limit)
         unsure = np.flatnonzero(~below)
@@ -1237,7 +1244,15 @@ def _inverse_norms_below(D: np.ndarray, logdet: np.ndarray, limit: float) -> np.
 def _inverse_norms(D: np.ndarray) -> np.ndarray:
     """|D^-1|_F of each matrix of a batch (NaN for a singular one)."""
     with np.errstate(all="ignore"):
-        return np.linalg.norm(_solve_each(D, np.broadcast_to(np.eye(D.shape[-1]), D.shape)), axis=(1, 2))
+        return np.sqrt(_frobenius2(_solve_each(D, np.broadcast_to(np.eye(D.shape[-1]), D.shape))))
+
+
+def _frobenius2(M: np.ndarray) -> np.ndarray:
+    """|M_b|_F^2 of each matrix of a stack (B, m, m): one real dot product per matrix (complex
+    entries as (re, im) pairs), without the temporaries of np.linalg.norm."""
+    flat = np.ascontiguousarray(M).reshape(len(M), -1)
+    flat = flat.view(np.float64) if flat.dtype.kind == "c" else flat
+    return np.einsum("bi,bi->b", flat, flat)
 
 
 def _polynomial_matrices(coef: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -1315,7 +1330,7 @@ def _families(char, a, theta, tau, K, keep):
     lam = np.empty((s_count, B, n2), dtype=complex)
     V = np.empty((s_count, B, n2, n2), dtype=complex)
     if len(cut_idx):
-        lam[cut_idx], V[cut_idx] = np.linalg.eig(char.generators(c)[cut_idx])
+        lam[cut_idx], V[cut_idx] = np.linalg.eig(char.generators(c, segments=cut_idx))
     if len(cut_idx) < s_count:  # free flight: one eigen-decomposition of A0
         lam0, V0 = char.free_eig()
         lam[~char.cutting], V[~char.cutting] = lam0, V0
