@@ -240,3 +240,53 @@ def test_a_branch_the_coarse_cut_model_puts_above_the_answer_is_found_at_the_ans
     r = floquet.critical_depth(dyn, COARSE_BLIND_CUT, COARSE_BLIND_RPM)
     assert r.verified and r.converged and r.depth_m < 1.22e-3
     assert sim.grows_either_side(COARSE_BLIND_ROWS, COARSE_BLIND_CUT, COARSE_BLIND_RPM, r.depth_m) == (False, True)
+
+
+#: A random uncoupled structure of a blind search (2026-12-03, seed 21, case 378): six teeth in up
+#: milling at a/D 0.026, 16,339 rpm, spindle modes of 1.5 and 3.6-4.0 kHz. The coarse cut model
+#: (4 sub-steps a radian, two segments in the cut) has a boundary point at 28.2 mm that Newton
+#: cannot follow to any finer model; the engine used to keep it through every level and report
+#: 28.2 mm, not converged, with no error estimate. The answer is 38.5 mm.
+LOST_ROWS = [
+    ("x", 5.932871309627603, 0.007222808442928688, 545627.6715649812), ("x", 96.0983978472647, 0.07550490078664333, 18680221.389412597),
+    ("x", 1502.554177505468, 0.006465010808608014, 31931101.77058752), ("x", 3957.4587743033903, 0.0718645481414372, 6187705.21261986),
+    ("y", 22.142660598226527, 0.036033360360907214, 319393.20906828187), ("y", 32.002647065900376, 0.005992218117519807, 5707949.5621518465),
+    ("y", 566.511248485879, 0.01133171560835384, 14953786.882724462), ("y", 3649.1502850408538, 0.005869468836161705, 7482625.441257906),
+]
+LOST_CUT = Cut(teeth=6, kt_pa=310332309.13244766, kn_pa=27223580.7393122, radial_immersion=0.026303005219766383, milling="up")
+LOST_RPM = 16339.304871629063
+
+
+def test_a_point_no_finer_cut_model_has_is_dropped_and_the_job_solved_again_where_it_was_lost():
+    """Where Newton cannot follow any point of a job to the next level, the job is solved again
+    from the seeds at that level (and a point that cannot be followed is dropped where the job
+    has others). The answer converges and is verified; the independent time-domain simulation
+    decays 5 % below it and grows 5 % above it, and decays at 1.05 x the 28.2 mm the engine used
+    to report."""
+    dyn = structure(LOST_ROWS)
+    r = floquet.critical_depth(dyn, LOST_CUT, LOST_RPM)
+    assert r.verified and r.converged and r.rel_error_estimate < 0.01
+    assert sim.grows_either_side(LOST_ROWS, LOST_CUT, LOST_RPM, r.depth_m) == (False, True)
+    assert not sim.grows(LOST_ROWS, LOST_CUT.teeth, LOST_CUT.kt_pa, LOST_CUT.kn_pa, LOST_CUT.radial_immersion, LOST_CUT.milling, LOST_RPM, 1.05 * 28.17e-3)
+
+
+#: A random uncoupled structure of the same search (seed 21, case 1179): eight teeth in up milling
+#: at a/D 0.04, 986 rpm. Its job is solved again at the finest level, where a repaired point is
+#: never refined and has no eigenvector; putting the irrelevant modes back in then raised a
+#: TypeError that took the whole command down.
+UNREFINED_ROWS = [
+    ("x", 5.420755932387263, 0.023694394544700053, 1370766.742384123), ("x", 48.14258415092908, 0.005072133991910601, 413763.6747075513),
+    ("x", 858.8606971356173, 0.011257795927347674, 13259327.861382326), ("x", 9579.929837801801, 0.07048380170294317, 40426611.368929446),
+    ("y", 13.058833658627693, 0.009207363785735072, 8007575.14752361), ("y", 52.10924497194822, 0.028472966577944937, 11764486.943184024),
+    ("y", 1106.3392174986443, 0.009115720258941133, 39822153.01047292), ("y", 7678.845598858744, 0.01844032595782801, 15850728.881126722),
+]
+UNREFINED_CUT = Cut(teeth=8, kt_pa=538745409.2330619, kn_pa=94987155.94453108, radial_immersion=0.04001908646003032, milling="up")
+UNREFINED_RPM = 986.0579306897042
+
+
+def test_a_point_repaired_at_the_finest_level_goes_back_to_the_full_structure_without_its_eigenvector():
+    """The result comes back (a depth; flagged where a repair at the finest level has no level
+    above it to estimate its error) instead of an exception."""
+    result = critical_points([structure(UNREFINED_ROWS)], UNREFINED_CUT, UNREFINED_RPM)[0]
+    assert math.isfinite(result.depth_m) and result.depth_m > 0
+    assert result.converged is False or result.rel_error_estimate <= 0.02

@@ -1679,7 +1679,7 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
         cands.append((a0[m], np.where(t0[m] > np.pi, 2 * np.pi - t0[m], t0[m]), [v0[i] for i in m], np.where(t0[m] > np.pi, np.conj(g0[m]), g0[m]),
                       np.array([isinstance(search[seed_key[i]], ProjectedCharacteristic) for i in m], bool)))
         start_of.append(tuple(zip(cands[-1][0].tolist(), cands[-1][1].tolist(), cands[-1][3].tolist(), cands[-1][2])))
-    points, missed, ladders = _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol, verify, seed_level, branch_families, hinted, frequencies)
+    points, missed, ladders, lost = _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol, verify, seed_level, branch_families, hinted, frequencies)
     # a neighbour starts from every point the search converged on and from the reported branches
     # (a repaired one included: the seeds of a neighbour would miss it too)
     points = [p if p is None else dataclasses.replace(p, starts=st + tuple((a, th, np.nan, None) for a, _, th in p.branches if not any(abs(a - b) <= 1e-3 * a for b, *_ in st)))
@@ -1694,6 +1694,14 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
         redo = _solve([dyns[jobs[j][0]]], cut, rpm[[jobs[j][1]]], rel_tol, substeps, True, True, branch_families, hints=hints, frequencies=frequencies)[0][0]
         points[j] = redo if redo.depth_m < p.depth_m else dataclasses.replace(p, verified=False)
 
+    for j in np.flatnonzero(lost):  # no point followed to the finer cut model: from the seeds there
+        if points[j] is not None:
+            redo = _solve([dyns[jobs[j][0]]], cut, rpm[[jobs[j][1]]], rel_tol, points[j].substeps_per_rad, verify or hinted[j], True, branch_families,
+                          frequencies=frequencies)[0][0]
+            if np.isfinite(redo.depth_m) and redo.depth_m > 0:  # the lost point bounds nothing at that resolution
+                points[j] = redo
+                missed[j] = False
+                ladders.pop(j, None)
     for j in np.flatnonzero(missed):  # a lower branch at the answer's resolution: from the seeds there
         solve_lower(j, points[j].substeps_per_rad)
         ladders.pop(j, None)
@@ -1814,7 +1822,9 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
     chatter frequency. Newton steps batched over jobs. A `hinted` job is always verified; where
     its count is not 0 its point is None (the caller solves it again from the seeds). Also
     returns the jobs whose count at the answer's own (finer) resolution is not 0 and each
-    verified job's count interpolant ({job: (level, depth, coefficients, bound)})."""
+    verified job's count interpolant ({job: (level, depth, coefficients, bound)}) and the jobs
+    no point of which Newton could follow to a finer level (the caller solves them again from the
+    seeds at that level)."""
     hinted = np.zeros(len(jobs), bool) if hinted is None else hinted
     retry = np.zeros(len(jobs), bool)
     J = len(jobs)
@@ -1876,6 +1886,7 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
     err = np.full(len(ej), np.inf)
     conv_job = np.zeros(J, bool)
     level_job = np.zeros(J, int)
+    lost = np.zeros(J, bool)  # no point of the job followed to level_job + 1
     active = np.ones(len(ej), bool)
 
     def keep_only(sel):
@@ -1903,9 +1914,26 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
         for k, i in enumerate(idx):
             vec[i] = vn[k]
         level += 1
-        for j in np.unique(ej[idx]):
+        # a point Newton cannot follow to the finer cut model is no boundary point of it (seen: a
+        # 7.06 mm branch of 4 sub-steps a radian, 5 % immersion, 4.6 kHz modes, that no finer
+        # model has; the answer there is 27.5 mm): dropped where the job has another point at
+        # this level (a real lower branch is then caught by the count at the answer's resolution),
+        # else the job is lost here and solved again from the seeds at this resolution
+        failed = np.zeros(len(ej), bool)
+        failed[idx[~ok]] = True
+        drop = np.zeros(len(ej), bool)
+        refined = np.unique(ej[idx])
+        level_job[refined] = level
+        for j in refined:
             mine = np.flatnonzero(ej == j)
-            level_job[j] = level
+            lost[j] = failed[mine].all()  # (a repair that adds a point later takes the job up again)
+            if lost[j]:
+                active[mine] = False
+            elif verify or hinted[j]:  # unverified jobs keep them (not converged: flagged)
+                drop[mine[failed[mine]]] = True
+        keep_only(np.flatnonzero(~drop))
+        for j in refined[~lost[refined]]:
+            mine = np.flatnonzero(ej == j)
             b = mine[np.argmin(ea[mine])]
             close = mine[ea[mine] <= ea[b] * (1 + rel_tol)]
             if err[b] <= 0.5 * rel_tol and np.all(err[close] <= 0.5 * rel_tol) and not char(jobs[j][0], level, True).unresolved(ea[b], tau_all[jobs[j][1]]):
@@ -1972,7 +2000,10 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
             N, kp = dyns[o].n_modes, keeps[o]
             ns = len(kp)
             v = np.zeros(2 * N, dtype=complex)
-            v[kp], v[N + kp] = vec[i][:ns], vec[i][ns:]
+            if vec is None or vec[i] is None:  # a point never refined (a repair at the finest level): Newton picks its own
+                v[:] = np.nan
+            else:
+                v[kp], v[N + kp] = vec[i][:ns], vec[i][ns:]
             full_vec.append(v)
         ob, lb = owner[back], level_job[ej[back]]
         for lv in np.unique(lb):
@@ -2024,7 +2055,7 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
         a, hz, th, family, er = branches[0]
         points.append(CriticalPoint(r, a, hz, th, family, base * 2.0**lv, er, bool(conv_job[j] and er <= rel_tol), verified[j],
                                     tuple((b[0], b[1], b[2]) for b in branches), bool(repaired[j])))
-    return points, missed, ladders
+    return points, missed, ladders, lost
 
 
 def _dedupe(a, t, rel: float = 1e-5, index: bool = False):
