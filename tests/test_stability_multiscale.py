@@ -290,3 +290,27 @@ def test_a_point_repaired_at_the_finest_level_goes_back_to_the_full_structure_wi
     result = critical_points([structure(UNREFINED_ROWS)], UNREFINED_CUT, UNREFINED_RPM)[0]
     assert math.isfinite(result.depth_m) and result.depth_m > 0
     assert result.converged is False or result.rel_error_estimate <= 0.02
+
+
+#: A random uncoupled structure of the same search (seed 22, case 1379): one tooth in down milling
+#: at a/D 0.023, 336 rpm (a 1.8 kHz mode with zeta 0.0066). The job ends repaired at the finest
+#: level (128 sub-steps a radian), where there is no level above to estimate the error: it used
+#: to come back 'not converged' with no estimate.
+FINEST_ROWS = [
+    ("x", 39.545491630992025, 0.04796787163841591, 6128324.591765062), ("x", 32.01729121029821, 0.03559729941255298, 1510966.9939058102),
+    ("x", 1765.9196306706494, 0.00656329001176332, 5387682.54621111), ("x", 4900.865404322669, 0.03403699004484514, 38307715.941144854),
+    ("y", 13.722042312738543, 0.005239914873154623, 5053675.18362871), ("y", 126.57174787865301, 0.05994541293578757, 816258.3548958928),
+    ("y", 575.3890717716731, 0.0622101085664563, 12803935.707101801), ("y", 2962.8373698342816, 0.005641267209046759, 26657795.90353551),
+]
+FINEST_CUT = Cut(teeth=1, kt_pa=608986636.880974, kn_pa=224859682.71701849, radial_immersion=0.022762282583697148, milling="down")
+FINEST_RPM = 335.86321279108023
+
+
+def test_a_point_at_the_finest_level_estimates_its_error_one_level_down():
+    """Newton from the finest-level point one level down: the difference is the estimate (it
+    bounds the finer value's error as a step up does). The answer converges and is verified; the
+    independent time-domain simulation decays 5 % below it and grows 5 % above it."""
+    r = floquet.critical_depth(structure(FINEST_ROWS), FINEST_CUT, FINEST_RPM)
+    assert r.substeps_per_rad == floquet.MAX_SUBSTEPS_PER_RAD
+    assert r.verified and r.converged and r.rel_error_estimate < 0.01
+    assert sim.grows_either_side(FINEST_ROWS, FINEST_CUT, FINEST_RPM, r.depth_m) == (False, True)

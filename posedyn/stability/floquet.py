@@ -1991,6 +1991,22 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
         near_ties()
     while base * 2.0 ** (level + 1) <= MAX_SUBSTEPS_PER_RAD and active.any():
         refine()
+    # points at the finest level with no estimate (a repair there, a job solved again there): no
+    # level above is left, so one level down (Newton from the point; the difference bounds the
+    # finer value's error as it does upward)
+    top = _level(MAX_SUBSTEPS_PER_RAD, base)
+    at_top = np.array([level_job[j] == top and not lost[j] for j in ej], bool)
+    down = np.flatnonzero(at_top & ~np.isfinite(err)) if len(ej) else np.zeros(0, int)
+    if len(down):
+        v_in = None if vec is None or any(vec[i] is None for i in down) else [vec[i] for i in down]
+        a_d, _, ok, _, _ = _batched_step(char, keeps, top - 2, ea[down], et[down], etau[down], owner[down], Gc[down], v_in)
+        err[down] = np.where(ok, np.abs(a_d - ea[down]) / ea[down], np.inf)
+        for j in np.unique(ej[down]):
+            mine = np.flatnonzero(ej == j)
+            b = mine[np.argmin(ea[mine])]
+            close = mine[ea[mine] <= ea[b] * (1 + rel_tol)]
+            if err[b] <= 0.5 * rel_tol and np.all(err[close] <= 0.5 * rel_tol) and not char(jobs[j][0], top, True).unresolved(ea[b], tau_all[jobs[j][1]]):
+                conv_job[j] = True
     # the irrelevant modes back in, same resolution
     back = np.flatnonzero([len(keeps[o]) < dyns[o].n_modes for o in owner])
     if len(back):
