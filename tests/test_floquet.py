@@ -168,3 +168,16 @@ def test_batched_exponential_matches_scipy_across_norms_and_sizes(dtype):
         buffer = np.full(A.shape, np.nan, dtype=A.dtype)  # written in place, block by block
         assert sdm.expm_batched(A, out=buffer) is buffer
         assert np.array_equal(buffer, got)
+
+
+def test_the_repairs_newton_starts_skip_a_monodromy_that_overflows():
+    """Far past every boundary (10 km here; a blind search reached such depths on a structure
+    the cut barely touches) the monodromy overflows for every nu but 1: the repair's starts come
+    back empty instead of the eigen-solver raising and taking the result down."""
+    char = converged.FloquetCharacteristic(ROBOT, CUT, 8.0)
+    tau = float(CUT.tooth_period_s(2000.0))
+    with np.errstate(all="ignore"):
+        M = char.monodromy(1e4 * (1.0 - np.exp(-1j * np.linspace(0.0, np.pi, 5))), np.full(5, tau))
+    assert not np.all(np.isfinite(M))  # the case is the overflow
+    depths, thetas = converged._newton_from_nearest(char, tau, 1e4, 16, 4)
+    assert np.all(np.isfinite(depths)) and len(depths) == len(thetas)

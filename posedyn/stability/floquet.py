@@ -2161,8 +2161,14 @@ def _newton_from_nearest(char, tau, a, points: int, starts: int):
     M(a (1 - nu)) comes nearest to 1 / nu (local minima of min_k |ln(nu sigma_k)|), each on that
     eigenvalue's eigenvector; sorted by depth."""
     th = np.linspace(0.0, np.pi, points)
+    with np.errstate(all="ignore"):  # an overflowing monodromy (depths far past any boundary) gives no start
+        M = char.monodromy(a * (1.0 - np.exp(-1j * th)), np.full(len(th), tau))
+    finite = np.all(np.isfinite(M), axis=(1, 2))
+    th, M = th[finite], M[finite]
+    if not len(th):
+        return np.zeros(0), np.zeros(0)
     nu = np.exp(-1j * th)
-    values, vectors = np.linalg.eig(char.monodromy(a * (1.0 - nu), np.full(len(th), tau)))
+    values, vectors = np.linalg.eig(M)
     with np.errstate(all="ignore"):
         dist = np.abs(np.log(values * nu[:, None]))
     dist = np.where(np.isfinite(dist), dist, np.inf)
