@@ -298,3 +298,31 @@ def test_the_repair_bisects_below_its_probes_when_every_probe_is_unstable():
     assert r.verified and r.converged and r.repaired
     (depth, theta), residual = exact_boundary_point(dyn, NO_SEED_CUT, NO_SEED_RPM, r.depth_m, r.theta_rad, iterations=2)
     assert residual < 1e-6 and abs(r.depth_m / depth - 1.0) < 0.02
+
+
+#: A random absorber structure of a blind search with low immersion (2026-12-03, seed 23, case
+#: 954): 3 teeth in down milling at a/D 0.13, 574 rpm. The seeds found no boundary point, the
+#: repair found 1.26 mm on the coarse cut model (4 sub-steps a radian) and verified it there, where
+#: no island lies below; the answer refined to 1.254 mm at 8 sub-steps a radian, where a Hopf
+#: island spans 0.79-0.85 of it, holding the 0.8 rung. The count at the answer's resolution did not
+#: read the rungs: 1.254 mm was reported verified, 28 % too deep.
+RUNG_HOST = [
+    ("x", 38.34602243071863, 0.02642052716949262, 4042041.991557958), ("x", 178.2845136200903, 0.02738780375703568, 1355937.0266659951),
+    ("x", 2324.4210424205053, 0.008830439870548405, 45795877.97567631), ("x", 3540.538831660363, 0.06127718789515482, 13163642.79888466),
+    ("y", 16.628441312925286, 0.01080175216676321, 5960500.676589123), ("y", 78.31707199588604, 0.025106032645655047, 2828444.9340007766),
+    ("y", 2189.456505955548, 0.051200250526955246, 26685201.660250325), ("y", 5073.54917224549, 0.007914231925120998, 31366342.6952848),
+]
+RUNG_ABSORBER = (3.8846123517912714, 6559113.709577325, 0.054097543443953525)
+RUNG_CUT = Cut(teeth=3, kt_pa=546470907.1182313, kn_pa=210621773.7717388, radial_immersion=0.12807367392845512, milling="down")
+RUNG_RPM = 574.2311648919588
+
+
+def test_the_hopf_rungs_are_read_again_at_the_answers_resolution():
+    """Where the answer's resolution is finer than the verification's, the count there reads the
+    Hopf rungs too; the job is solved again at that resolution and the answer is the island's
+    bottom, a boundary point of the DOP853 characteristic (to 0.02 % when written)."""
+    dyn = absorber_structure(RUNG_HOST, RUNG_ABSORBER)
+    r = floquet.critical_depth(dyn, RUNG_CUT, RUNG_RPM)
+    assert r.verified and r.converged and r.depth_m < 1.1e-3
+    (depth, theta), residual = exact_boundary_point(dyn, RUNG_CUT, RUNG_RPM, r.depth_m, r.theta_rad, iterations=2)
+    assert residual < 1e-6 and abs(r.depth_m / depth - 1.0) < 0.01

@@ -2038,8 +2038,8 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
         mine = np.flatnonzero(ej == j)
         lv = int(level_job[j])
         if len(mine) and (verify or hinted[j]) and not retry[j] and lv > vlevel:
-            count, resolved, _ = unstable_count(char(s, lv, True), VERIFY_FRACTION * ea[mine].min(), tau_all[e], extra=et[mine])
-            missed[j] = not (count == 0 and resolved)
+            count, resolved, rung, _ = _verify_count(char(s, lv, True), VERIFY_FRACTION * ea[mine].min(), tau_all[e], et[mine])
+            missed[j] = not (count == 0 and resolved and rung is None)
     # chatter frequencies, batched per (structure, resolution)
     wanted: dict = {}
     for j, (s, e) in enumerate(jobs):
