@@ -144,8 +144,11 @@ from posedyn.stability.cutting import Cut, engaged_integral, mean_force_matrix
 
 #: Sub-steps per radian of tool angle in a cutting segment, coarsest level.
 SUBSTEPS_PER_RAD = 4.0
-#: Finest level tried (sub-steps per radian) before giving up on rel_tol.
-MAX_SUBSTEPS_PER_RAD = 128.0
+#: Finest level tried (sub-steps per radian) before giving up on rel_tol. A mode must fit in a
+#: cutting sub-step at most once (SUBSTEP_PERIODS) before a level's estimate counts: 10 kHz at 200
+#: rpm needs 480 a radian (at 128, 22 of 24 flagged low-speed answers of a blind search could not
+#: converge; some were 75 % off).
+MAX_SUBSTEPS_PER_RAD = 512.0
 #: Modes with peak compliance below this fraction of the largest are left out of the search.
 IRRELEVANT = 1e-3
 #: Seeds refined at the coarse level (lowest zeroth-order depths first), plus the lowest
