@@ -1936,12 +1936,15 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
                 drop[mine[failed[mine]]] = True
         keep_only(np.flatnonzero(~drop))
         for j in refined[~lost[refined]]:
-            mine = np.flatnonzero(ej == j)
-            b = mine[np.argmin(ea[mine])]
-            close = mine[ea[mine] <= ea[b] * (1 + rel_tol)]
-            if err[b] <= 0.5 * rel_tol and np.all(err[close] <= 0.5 * rel_tol) and not char(jobs[j][0], level, True).unresolved(ea[b], tau_all[jobs[j][1]]):
-                conv_job[j] = True
-                active[mine] = False
+            settle(j, level)
+
+    def settle(j, lv):  # converged where the lowest (and near) points moved by less than rel_tol / 2 and the cut model at lv resolves the soft modes
+        mine = np.flatnonzero(ej == j)
+        b = mine[np.argmin(ea[mine])]
+        close = mine[ea[mine] <= ea[b] * (1 + rel_tol)]
+        if err[b] <= 0.5 * rel_tol and np.all(err[close] <= 0.5 * rel_tol) and not char(jobs[j][0], lv, True).unresolved(ea[b], tau_all[jobs[j][1]]):
+            conv_job[j] = True
+            active[mine] = False
 
     near_ties()
     if base * 2.0 ** (level + 2) <= MAX_SUBSTEPS_PER_RAD and len(ej):
@@ -2005,11 +2008,7 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
         a_d, _, ok, _, _ = _batched_step(char, keeps, top - 2, ea[down], et[down], etau[down], owner[down], Gc[down], v_in)
         err[down] = np.where(ok, np.abs(a_d - ea[down]) / ea[down], np.inf)
         for j in np.unique(ej[down]):
-            mine = np.flatnonzero(ej == j)
-            b = mine[np.argmin(ea[mine])]
-            close = mine[ea[mine] <= ea[b] * (1 + rel_tol)]
-            if err[b] <= 0.5 * rel_tol and np.all(err[close] <= 0.5 * rel_tol) and not char(jobs[j][0], top, True).unresolved(ea[b], tau_all[jobs[j][1]]):
-                conv_job[j] = True
+            settle(j, top)
     # the irrelevant modes back in, same resolution
     back = np.flatnonzero([len(keeps[o]) < dyns[o].n_modes for o in owner])
     if len(back):
