@@ -114,7 +114,9 @@ estimate (the error decreases at least linearly in the sub-step length, so the d
 the error of the finer value); the resolution doubles until the estimate is below rel_tol / 2
 and every mode at least 1 / SOFT_MODE as stiff as the cut is resolved (at most SUBSTEP_PERIODS
 of its periods in a cutting sub-step: before that the error is not yet monotone in the sub-step
-and two levels can agree by chance).
+and two levels can agree by chance). A point Newton cannot follow to the next level is dropped
+where its job has others; a job none of whose points follows is solved again from the seeds at
+that level; a point at the finest level with no estimate takes it from one level down.
 
 Dominant chatter frequency: as `chatter.chatter_frequencies` defines it (Dombovari et al. 2011):
 the Floquet solution at the critical point is exp(i theta t / tau) p(t) with p tau-periodic;
@@ -2005,7 +2007,7 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
     down = np.flatnonzero(at_top & ~np.isfinite(err)) if len(ej) else np.zeros(0, int)
     if len(down):
         v_in = None if vec is None or any(vec[i] is None for i in down) else [vec[i] for i in down]
-        a_d, _, ok, _, _ = _batched_step(char, keeps, top - 2, ea[down], et[down], etau[down], owner[down], Gc[down], v_in)
+        a_d, _, ok, _, _ = _batched_step(char, keeps, top - 2, ea[down], et[down], etau[down], owner[down], Gc[down], v_in)  # Newton at top - 1
         err[down] = np.where(ok, np.abs(a_d - ea[down]) / ea[down], np.inf)
         for j in np.unique(ej[down]):
             settle(j, top)
