@@ -1690,19 +1690,21 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
     points = [p if p is None else dataclasses.replace(p, starts=st + tuple((a, th, np.nan, None) for a, _, th in p.branches if not any(abs(a - b) <= 1e-3 * a for b, *_ in st)))
               for p, st in zip(points, start_of)]
 
+    def solve_again(j, substeps, hints=None, check=True):  # job j from the seeds (and `hints`) at `substeps`
+        return _solve([dyns[jobs[j][0]]], cut, rpm[[jobs[j][1]]], rel_tol, substeps, check, True, branch_families, hints=hints, frequencies=frequencies)[0][0]
+
     def solve_lower(j, substeps, start=None):
         """Job j solved again at `substeps` (from the seeds; from `start` = (depth, theta) and
         its point where given): a converged boundary point bounds the critical depth from above,
         so the redo replaces the point only where lower, else the point is not verified."""
         p = points[j]
         hints = None if start is None else [[(float(start[0]), _fold(start[1]), np.nan, None), (p.depth_m, p.theta_rad, np.nan, None)]]
-        redo = _solve([dyns[jobs[j][0]]], cut, rpm[[jobs[j][1]]], rel_tol, substeps, True, True, branch_families, hints=hints, frequencies=frequencies)[0][0]
+        redo = solve_again(j, substeps, hints=hints)
         points[j] = redo if redo.depth_m < p.depth_m else dataclasses.replace(p, verified=False)
 
     for j in np.flatnonzero(lost):  # no point followed to the finer cut model: from the seeds there
         if points[j] is not None:
-            redo = _solve([dyns[jobs[j][0]]], cut, rpm[[jobs[j][1]]], rel_tol, points[j].substeps_per_rad, verify or hinted[j], True, branch_families,
-                          frequencies=frequencies)[0][0]
+            redo = solve_again(j, points[j].substeps_per_rad, check=bool(verify or hinted[j]))
             if np.isfinite(redo.depth_m) and redo.depth_m > 0:  # the lost point bounds nothing at that resolution
                 points[j] = redo
                 missed[j] = False
