@@ -105,3 +105,38 @@ def test_the_inverse_norm_screen_agrees_with_the_inverse():
     exact = np.linalg.norm(np.linalg.inv(D), axis=(1, 2))
     for limit in (1e2, 1e6, 1e12):
         assert np.array_equal(floquet._inverse_norms_below(D, logdet, limit), exact < limit)
+
+
+def test_segment_blocks_change_the_memory_not_the_numbers(monkeypatch):
+    """Per-segment arrays are built in blocks of SEGMENT_BLOCK_BYTES (a full cut at 512 sub-steps a
+    radian has thousands of segments; at once they took 3.7 GB on one pose): blocks of a few
+    segments give the count the same interpolants, product and error bound, bit for bit, as one
+    block, and the same monodromies (to rounding: expm scales each block of its stack by its
+    own norm) and chatter families, on the issue-17 structure at 64 sub-steps a radian."""
+    from test_stability_multiscale import CUT, TABLE, structure
+
+    char = floquet.FloquetCharacteristic(structure(TABLE), CUT, 64.0)
+    tau = float(CUT.tooth_period_s(2000.0))
+    E = floquet.segment_samples(char, 1.5e-3, tau, 16)
+    assert len(E) > 40  # enough segments for several blocks
+
+    c = 1.5e-3 * (1.0 - np.exp(-1j * np.linspace(0.0, np.pi, 9)))
+
+    def count_parts():
+        coef, error = floquet.segment_interpolants(E, 16)
+        return coef, error, *floquet.circle_monodromies(coef, error, 32)
+
+    def families():
+        return floquet.floquet_families(char, [1.5e-3, 1.6e-3], [1.9, 2.3], tau)
+
+    whole, M, fam = count_parts(), char.monodromy(c, np.full(len(c), tau)), families()
+    per_segment = 16 * E[0, 0].size * 16  # the FFT's bytes a segment (16 roots)
+    monkeypatch.setattr(floquet, "SEGMENT_BLOCK_BYTES", 7 * per_segment)  # 7 segments a block there, 6 in the products (17 roots)
+    assert len(floquet._blocks(len(E), 17 * E[0, 0].size * 16)) > 5
+    for w, b in zip(whole, count_parts()):
+        np.testing.assert_array_equal(w, b)
+    assert len(floquet._blocks(len(c), len(E) * E[0, 0].size * 16)) == len(c)  # a monodromy a block
+    np.testing.assert_allclose(char.monodromy(c, np.full(len(c), tau)), M, rtol=0, atol=1e-12 * np.abs(M).max())
+    for (hz, family), (hz_b, family_b) in zip(fam, families()):
+        assert hz == hz_b and len(family) == len(family_b)
+        np.testing.assert_allclose(np.array(family_b), np.array(family), rtol=1e-9)
