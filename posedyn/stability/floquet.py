@@ -421,7 +421,10 @@ class FloquetCharacteristic:
             E[cut_idx] = sdm.expm_batched(A.reshape(-1, n2, n2)).reshape(len(cut_idx), len(c), n2, n2)
         free_idx = np.flatnonzero(~self.cutting)
         if len(free_idx):  # independent of c: once per distinct delay
-            utau, inverse = np.unique(tau, return_inverse=True)
+            if np.all(tau == tau[0]):  # one delay (np.unique costs more than the rest of this)
+                utau, inverse = tau[:1], np.zeros(len(tau), int)
+            else:
+                utau, inverse = np.unique(tau, return_inverse=True)
             E[free_idx] = self._free_flight(utau)[:, inverse.reshape(-1)]
         return E
 
@@ -948,7 +951,9 @@ def _critical_log(char, a, theta, tau, target=None, idx=None, mode=None, vec=Non
             g_f = np.log(sig_f * nu[fol])
         ok_f &= np.isfinite(g_f)
         out_g[fol[ok_f]], out_v[fol[ok_f]] = g_f[ok_f], v_f[ok_f]
-        todo = np.setdiff1d(rows, fol[ok_f])
+        left = np.ones(len(a), bool)
+        left[fol[ok_f]] = False
+        todo = rows[left]
         if not len(todo):
             return out_g, out_v
     finite = np.all(np.isfinite(M[todo]), axis=(1, 2))  # an overflowing element dies (NaN), not the batch
@@ -1386,8 +1391,9 @@ def _families(char, a, theta, tau, K, keep):
         z = np.einsum("bij,bj->bi", V[i], np.exp(lam[i] * dt[i][:, None]) * y)
     P = np.einsum("dk,sbkm->sbdm", char.S, V)  # (s, B, 2, 2n)
     # coeff_bjd = sum_s,m weights_sbj g_sbjm Y_sbm P_sbdm, as one product per element (einsum's
-    # path search cost more than the sum: 3.5 ms against 0.4 ms on the issue-17 pose), summed
-    # over blocks of segments (at 512 sub-steps a radian the (s, B, J, 2n) arrays reach GBs)
+    # path search cost more than the sum: 3.5 ms against 0.4 ms, timed alone on the issue-17
+    # pose's shapes), summed over blocks of segments (at 512 sub-steps a radian the
+    # (s, B, J, 2n) arrays reach GBs)
     coeff = np.zeros((B, len(j), P.shape[2]), dtype=complex)
     for lo, hi in _blocks(s_count, 4 * B * len(j) * n2 * 16):
         x = lam[lo:hi, :, None, :] - 1j * omega[None, :, :, None]  # (s, B, J, 2n)

@@ -284,7 +284,7 @@ def expm_batched(A: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     1-norm). No linear solve: for the many small matrices here a batched LU costs as much as 15
     products (the [13/13] Pade this replaced, 1.5x slower; same results to 1e-14). `out`: a
     (k, s, s) array the blocks are written into (returned)."""
-    block = int(np.clip(EXPM_BLOCK_BYTES // (A.shape[-1] ** 2 * A.itemsize), 16, 128))
+    block = min(max(EXPM_BLOCK_BYTES // (A.shape[-1] ** 2 * A.itemsize), 16), 128)
     if out is None and len(A) <= block:
         return _expm_block(A)
     out = np.empty_like(A) if out is None else out
