@@ -140,3 +140,19 @@ def test_segment_blocks_change_the_memory_not_the_numbers(monkeypatch):
     for (hz, family), (hz_b, family_b) in zip(fam, families()):
         assert hz == hz_b and len(family) == len(family_b)
         np.testing.assert_allclose(np.array(family_b), np.array(family), rtol=1e-9)
+
+
+def test_a_count_whose_monodromy_overflows_is_unresolved_without_a_warning(monkeypatch):
+    """Far past every boundary (the repair of an absorber case that reads 452 mm counted at
+    metres) M overflows: the direct count says it is not resolved, and prints no RuntimeWarning."""
+    import warnings
+
+    from test_stability_multiscale import CUT, TABLE, structure
+
+    char = floquet.FloquetCharacteristic(structure(TABLE), CUT, 4.0)
+    tau = float(CUT.tooth_period_s(2000.0))
+    monkeypatch.setattr(floquet, "SUBSTEP_NODES", (2, 2))  # the direct samples
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        count, resolved, _ = floquet.unstable_count(char, 1e6, tau)
+    assert not resolved

@@ -1232,8 +1232,9 @@ def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int
             return out
 
     def direct(t):
-        M = char.monodromy(a * (1.0 - np.exp(-1j * t)), np.full(len(t), tau))
-        sign, logdet = np.linalg.slogdet(np.eye(M.shape[-1]) - np.exp(-1j * t)[:, None, None] * M)
+        with np.errstate(all="ignore"):  # an overflowing M (depths far past every boundary): no count (`_winding`)
+            M = char.monodromy(a * (1.0 - np.exp(-1j * t)), np.full(len(t), tau))
+            sign, logdet = np.linalg.slogdet(np.eye(M.shape[-1]) - np.exp(-1j * t)[:, None, None] * M)
         return np.angle(sign), logdet
 
     return _winding(direct, th, max_points)
