@@ -144,7 +144,9 @@ def test_segment_blocks_change_the_memory_not_the_numbers(monkeypatch):
 
 def test_a_count_whose_monodromy_overflows_is_unresolved_without_a_warning(monkeypatch):
     """Far past every boundary (the repair of an absorber case that reads 452 mm counted at
-    metres) M overflows: the direct count says it is not resolved, and prints no RuntimeWarning."""
+    metres) M overflows: the direct count says it is not resolved, prints no RuntimeWarning, and
+    does not refine its grid up to 4096 samples for a count no sample can resolve (that case's
+    repair spent 270 of its 400 s there)."""
     import warnings
 
     from test_stability_multiscale import CUT, TABLE, structure
@@ -152,7 +154,11 @@ def test_a_count_whose_monodromy_overflows_is_unresolved_without_a_warning(monke
     char = floquet.FloquetCharacteristic(structure(TABLE), CUT, 4.0)
     tau = float(CUT.tooth_period_s(2000.0))
     monkeypatch.setattr(floquet, "SUBSTEP_NODES", (2, 2))  # the direct samples
+    sampled = []
+    monodromy = char.monodromy
+    monkeypatch.setattr(char, "monodromy", lambda c, t: sampled.append(len(c)) or monodromy(c, t))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         count, resolved, _ = floquet.unstable_count(char, 1e6, tau)
     assert not resolved
+    assert len(sampled) == 1 and sampled[0] <= 2 * floquet.VERIFY_POINTS  # the first grid only

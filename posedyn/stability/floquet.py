@@ -1324,7 +1324,8 @@ def _winding(sample, th, max_points):
     while True:
         d = np.angle(np.exp(1j * np.diff(ph, axis=1)))
         rough_lane = (np.abs(d) > np.pi / 4) | (np.abs(np.diff(lm, axis=1)) > np.log(4.0)) | ~np.isfinite(d)
-        rough = rough_lane.any(axis=0)
+        # a lane with a non-finite sample (an overflowing M) has no count whatever is added: not refined
+        rough = (rough_lane & np.all(np.isfinite(d), axis=1)[:, None]).any(axis=0)
         if not rough.any() or len(th) + rough.sum() > max_points:
             break
         mid = 0.5 * (th[:-1] + th[1:])[rough]
