@@ -1099,12 +1099,13 @@ def segment_samples(char: FloquetCharacteristic, a: float, tau: float, m: int, p
     """Every segment's exponential E_s(nu) = exp(dt_s A_s(a (1 - nu))) at the m-th roots of unity
     nu = exp(-2 pi i j / m), j = 0 .. m / 2 (the others are their conjugates: the structure is
     real), (segments, m / 2 + 1, 2n, 2n); `previous`: those at m / 2 roots (reused as the even j)."""
-    if previous is None:
-        return char.exponentials(a * (1.0 - np.exp(-2j * np.pi * np.arange(m // 2 + 1) / m)), np.full(m // 2 + 1, tau))
-    odd = 2.0 * np.pi * np.arange(1, m // 2, 2) / m
-    merged = np.empty(previous.shape[:1] + (m // 2 + 1,) + previous.shape[2:], dtype=complex)
-    merged[:, 0::2] = previous
-    merged[:, 1::2] = char.exponentials(a * (1.0 - np.exp(-1j * odd)), np.full(len(odd), tau))
+    with np.errstate(all="ignore"):  # overflowing exponentials (far past every boundary): `segment_interpolants` refuses them
+        if previous is None:
+            return char.exponentials(a * (1.0 - np.exp(-2j * np.pi * np.arange(m // 2 + 1) / m)), np.full(m // 2 + 1, tau))
+        odd = 2.0 * np.pi * np.arange(1, m // 2, 2) / m
+        merged = np.empty(previous.shape[:1] + (m // 2 + 1,) + previous.shape[2:], dtype=complex)
+        merged[:, 0::2] = previous
+        merged[:, 1::2] = char.exponentials(a * (1.0 - np.exp(-1j * odd)), np.full(len(odd), tau))
     return merged
 
 
@@ -1151,24 +1152,24 @@ def circle_monodromies(coef: np.ndarray, error: np.ndarray, N: int):
     before = np.ones((len(coef), len(nu)))  # |E_(s-1) ... E_1|_F (1 for none)
     after = np.ones((len(coef), len(nu)))  # |E_S ... E_(s+1)|_F
     M = None
-    for lo, hi in blocks:
-        En = values(lo, hi)
-        for i in range(hi - lo):
-            if M is None:
-                M = En[0]
-                continue
-            before[lo + i] = np.sqrt(_frobenius2(M))
-            M = En[i] @ M
-    Q = None
-    for lo, hi in blocks[::-1]:
-        En = En if len(blocks) == 1 else values(lo, hi)
-        for i in range(hi - lo - 1, -1, -1):
-            if Q is None:
-                Q = En[i]
-                continue
-            after[lo + i] = np.sqrt(_frobenius2(Q))
-            Q = Q @ En[i]
-    with np.errstate(all="ignore"):
+    with np.errstate(all="ignore"):  # an overflowing product (depths far past every boundary): an infinite bound
+        for lo, hi in blocks:
+            En = values(lo, hi)
+            for i in range(hi - lo):
+                if M is None:
+                    M = En[0]
+                    continue
+                before[lo + i] = np.sqrt(_frobenius2(M))
+                M = En[i] @ M
+        Q = None
+        for lo, hi in blocks[::-1]:
+            En = En if len(blocks) == 1 else values(lo, hi)
+            for i in range(hi - lo - 1, -1, -1):
+                if Q is None:
+                    Q = En[i]
+                    continue
+                after[lo + i] = np.sqrt(_frobenius2(Q))
+                Q = Q @ En[i]
         bound = float((coef.shape[-1] * error[:, None] * before * after).sum(axis=0).max())
     return M, bound
 
