@@ -7,6 +7,8 @@ against the count from direct samples."""
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -147,8 +149,6 @@ def test_a_count_whose_monodromy_overflows_is_unresolved_without_a_warning(monke
     metres) M overflows: the direct count says it is not resolved, prints no RuntimeWarning, and
     does not refine its grid up to 4096 samples for a count no sample can resolve (that case's
     repair spent 270 of its 400 s there)."""
-    import warnings
-
     from test_stability_multiscale import CUT, TABLE, structure
 
     char = floquet.FloquetCharacteristic(structure(TABLE), CUT, 4.0)

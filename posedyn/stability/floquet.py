@@ -1118,7 +1118,7 @@ def segment_interpolants(E: np.ndarray, m: int):
     structure, where M needs 16-32). Segment blocks of SEGMENT_BLOCK_BYTES."""
     coef = np.empty((len(E), m // 2) + E.shape[2:], dtype=complex)
     size = np.empty((len(E), m))
-    for lo, hi in _blocks(len(E), m * E[0, 0].size * 16):
+    for lo, hi in _blocks(len(E), m * E[0, 0].nbytes):
         with np.errstate(all="ignore"):
             block = np.fft.ifft(np.concatenate([E[lo:hi], np.conj(E[lo:hi, 1 : m // 2][:, ::-1])], axis=1), axis=1)
         size[lo:hi] = np.abs(block).max(axis=(2, 3))
@@ -1144,7 +1144,7 @@ def circle_monodromies(coef: np.ndarray, error: np.ndarray, N: int):
     products after, where there is more than one block)."""
     nu = np.exp(-2j * np.pi * np.arange(N // 2 + 1) / N)
     powers = nu[:, None] ** np.arange(coef.shape[1])[None, :]
-    blocks = _blocks(len(coef), len(nu) * coef[0, 0].size * 16)
+    blocks = _blocks(len(coef), len(nu) * coef[0, 0].nbytes)
 
     def values(lo, hi):  # E_s(nu) of segments lo .. hi - 1, (hi - lo, len(nu), 2n, 2n)
         return (powers @ coef[lo:hi].reshape((hi - lo,) + coef.shape[1:2] + (-1,))).reshape((hi - lo, len(nu)) + coef.shape[2:])
