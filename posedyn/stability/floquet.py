@@ -184,6 +184,13 @@ REFINE_TOL = 1e-4
 STALL = ((3, 4.0), (5, 1.0), (8, 0.05))
 #: Boundary points within this fraction of the lowest are refined too and reported as branches.
 NEAR_TIE = 0.10
+#: Which of two near boundary points is the lowest (and so the chatter frequency) is settled only
+#: where their error intervals, depth x (1 +- error estimate), do not overlap, or where both
+#: estimates are below TIE_TOL (a tie to 0.2 %: either is the answer). Seen in the sweep: a robot
+#: branch 0.1 % under a spindle branch at 8 sub-steps a radian, 0.3 % over it converged; the
+#: report said 18.8 Hz where the converged answer chatters at 5456.5 Hz, and the absorber tuned to
+#: it gave 2.69 mm where tuned to 5456.5 Hz it gives 1.63 mm.
+TIE_TOL = 1e-3
 #: Uniform theta samples of the winding count (plus the known boundary points' thetas and
 #: the free structure's multiplier angles; the grid is then refined adaptively).
 VERIFY_POINTS = 64
@@ -859,18 +866,19 @@ def ladder_islands(char, a0: float, coef: np.ndarray, bound: float, depth: float
 HOPF_RUNGS = (0.5, 0.63, 0.71, 0.8)
 
 
-def hopf_rung(char, a0: float, coef: np.ndarray, bound: float, tau: float, extra=()):
-    """The lowest of HOPF_RUNGS x a0 at which the winding count is not shown to be 0, None where
-    every rung counts 0. The counts read h on the interpolant of the count at a0
-    (`unstable_count(polynomial=...)`, `_interpolated_sample`: no exponential), with the same
+def hopf_rung(char, a0: float, coef: np.ndarray, bound: float, tau: float, extra=(), base: float | None = None):
+    """The lowest of HOPF_RUNGS x base (a0) at which the winding count is not shown to be 0, None
+    where every rung counts 0 (base <= a0). The counts read h on the interpolant of the count at
+    a0 (`unstable_count(polynomial=...)`, `_interpolated_sample`: no exponential), with the same
     Rouche check per sample; where that fails, on M itself (`unstable_count` at each rung)."""
+    base = a0 if base is None else base
     th = _count_thetas(char, tau, VERIFY_POINTS, extra)
     try:  # every rung on one grid
-        count, resolved, _ = _winding(functools.partial(_interpolated_sample, coef, bound, scales=HOPF_RUNGS), th, 4096)
+        count, resolved, _ = _winding(functools.partial(_interpolated_sample, coef, bound, scales=np.array(HOPF_RUNGS) * (base / a0)), th, 4096)
     except _Unsafe:
-        count, resolved = (np.array(x) for x in zip(*(unstable_count(char, s * a0, tau, extra=extra)[:2] for s in HOPF_RUNGS)))
+        count, resolved = (np.array(x) for x in zip(*(unstable_count(char, s * base, tau, extra=extra)[:2] for s in HOPF_RUNGS)))
     shown = (count > 0) | ~resolved
-    return float(HOPF_RUNGS[int(np.argmax(shown))] * a0) if shown.any() else None
+    return float(HOPF_RUNGS[int(np.argmax(shown))] * base) if shown.any() else None
 
 
 def _sign_change(a: np.ndarray, M: np.ndarray):
@@ -1192,7 +1200,7 @@ def monodromy_polynomial(half: np.ndarray, N: int):
 
 
 def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int | None = None, max_points: int = 4096, extra=(),
-                   polynomial: list | None = None):
+                   polynomial: list | None = None, direct: bool = True):
     """Number of Floquet multipliers outside the unit circle at depth a (argument principle):
     zeros of h(nu) = det(I - nu M(a (1 - nu))) in |nu| < 1 (h entire, h(0) = 1, conjugate
     symmetric). The phase of h is followed over theta in [0, pi] (nu = exp(-i theta)), the grid
@@ -1210,7 +1218,8 @@ def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int
     polynomial converges; the segments' roots double (SUBSTEP_NODES) where a sample fails the
     check; after that the count samples M directly. `polynomial` (a list): the interpolant the
     count used, (Taylor coefficients in nu, Frobenius bound of its error on |nu| <= 1), is
-    appended to it (`ladder_islands` reuses it below a)."""
+    appended to it (`ladder_islands` reuses it below a). `direct` False: no direct samples where
+    the interpolants fail (then (0, False, NaN): not resolved)."""
     th = _count_thetas(char, tau, VERIFY_POINTS if start is None else start, extra)
     m, E = SUBSTEP_NODES[0], None
     while m <= SUBSTEP_NODES[1]:
@@ -1231,14 +1240,16 @@ def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int
             if polynomial is not None:
                 polynomial.append((coef, bound + product_bound))
             return out
+    if not direct:
+        return 0, False, np.nan
 
-    def direct(t):
+    def sample_directly(t):
         with np.errstate(all="ignore"):  # an overflowing M (depths far past every boundary): no count (`_winding`)
             M = char.monodromy(a * (1.0 - np.exp(-1j * t)), np.full(len(t), tau))
             sign, logdet = np.linalg.slogdet(np.eye(M.shape[-1]) - np.exp(-1j * t)[:, None, None] * M)
         return np.angle(sign), logdet
 
-    return _winding(direct, th, max_points)
+    return _winding(sample_directly, th, max_points)
 
 
 def _count_thetas(char, tau: float, points: int, extra=()) -> np.ndarray:
@@ -1829,15 +1840,40 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
     return results
 
 
-def _verify_count(char, a: float, tau: float, thetas):
-    """(count, resolved, rung, ladder) of the verification at depth a on `char`'s cut model:
-    the winding count (`unstable_count`, the boundary points' thetas sampled), the Hopf rung
-    below where it is 0 (`hopf_rung`; None: none counts) and its interpolant for the flip ladder
-    ((a, coefficients, bound) for `ladder_islands`; None where the count sampled M directly)."""
+def _verify_count(char, a: float, tau: float, thetas, above: float | None = None):
+    """(count, resolved, rung, ladder, count_above) of the verification at depth a on `char`'s cut
+    model: the winding count (`unstable_count`, the boundary points' thetas sampled), the Hopf
+    rung below where it is 0 (`hopf_rung`; None: none counts), its interpolant for the flip
+    ladder ((depth, coefficients, bound) for `ladder_islands`; None where the count sampled M
+    directly) and the count at the depth `above` (> a; None where not asked or not resolved).
+    With `above` the interpolant is made there and the count at a read on it (every depth below
+    is on it: no more exponentials); where the interpolants fail there, no count above and the
+    count at a as without it."""
     poly: list = []
-    count, resolved, _ = unstable_count(char, a, tau, extra=thetas, polynomial=poly)
-    rung = hopf_rung(char, a, *poly[0], tau, thetas) if poly and count == 0 and resolved else None
-    return count, resolved, rung, ((a,) + poly[0] if poly else None)
+    count_above = None
+    if above is not None:
+        n_above, resolved_above, _ = unstable_count(char, above, tau, extra=thetas, polynomial=poly, direct=False)
+        if poly:
+            count_above = n_above if resolved_above else None
+            try:
+                th = _count_thetas(char, tau, VERIFY_POINTS, thetas)
+                counts, resolved_at, _ = _winding(functools.partial(_interpolated_sample, *poly[0], scales=(a / above,)), th, 4096)
+                count, resolved, a0 = int(counts[0]), bool(resolved_at[0]), above
+            except _Unsafe:  # not accurate enough down there: the count at a itself
+                poly = []
+    if not poly:
+        count, resolved, _ = unstable_count(char, a, tau, extra=thetas, polynomial=poly)
+        a0 = a
+    rung = hopf_rung(char, a0, *poly[0], tau, thetas, base=a) if poly and count == 0 and resolved else None
+    return count, resolved, rung, ((a0,) + poly[0] if poly else None), count_above
+
+
+def _crossings(theta) -> int:
+    """Zeros of h that boundary points at these thetas (folded to [0, pi]) bring into the unit
+    disk just above their depths: 1 at theta = pi (a real multiplier through -1), else 2 (a
+    conjugate pair)."""
+    theta = np.asarray(theta, dtype=float).reshape(-1)
+    return int(np.sum(np.where(np.abs(theta - np.pi) < 1e-6, 1, 2)))
 
 
 def _fold(theta: float) -> float:
@@ -1996,11 +2032,15 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
         for j in refined[~lost[refined]]:
             settle(j, level)
 
-    def settle(j, lv):  # converged where the lowest (and near) points moved by less than rel_tol / 2 and the cut model at lv resolves the soft modes
+    def settle(j, lv):  # converged where the lowest (and near) points moved by less than rel_tol / 2, the lowest is known to be the lowest (TIE_TOL) and the cut model at lv resolves the soft modes
         mine = np.flatnonzero(ej == j)
         b = mine[np.argmin(ea[mine])]
         close = mine[ea[mine] <= ea[b] * (1 + rel_tol)]
-        if err[b] <= 0.5 * rel_tol and np.all(err[close] <= 0.5 * rel_tol) and not char(jobs[j][0], lv, True).unresolved(ea[b], tau_all[jobs[j][1]]):
+        other = mine[(np.abs(et[mine] - et[b]) > 1e-3) | (np.abs(ea[mine] - ea[b]) > 1e-5 * ea[b])]  # other boundary points (not b again)
+        with np.errstate(invalid="ignore"):
+            ranked = (ea[other] * (1.0 - err[other]) > ea[b] * (1.0 + err[b])) | (np.maximum(err[other], err[b]) <= TIE_TOL)
+        if (err[b] <= 0.5 * rel_tol and np.all(err[close] <= 0.5 * rel_tol) and np.all(ranked)
+                and not char(jobs[j][0], lv, True).unresolved(ea[b], tau_all[jobs[j][1]])):
             conv_job[j] = True
             active[mine] = False
 
@@ -2021,10 +2061,11 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
             cv = char(s, vlevel, True)
             mine = np.flatnonzero(ej == j)
             top = ea[mine].min() if len(mine) else np.inf
+            above = (1.0 + rel_tol) * top
             if len(mine):
-                count, resolved, rung, ladder = _verify_count(cv, VERIFY_FRACTION * top, tau, et[mine])
+                count, resolved, rung, ladder, count_above = _verify_count(cv, VERIFY_FRACTION * top, tau, et[mine], above)
             else:
-                count, resolved, rung, ladder = 1, True, None, None
+                count, resolved, rung, ladder, count_above = 1, True, None, None, None
             if (count > 0 or not resolved or rung is not None) and hinted[j]:
                 retry[j] = True
                 continue
@@ -2035,7 +2076,23 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
                     add_j.append(j)
                     add_a.append(extra[0])
                     add_t.append(extra[1])
-                    count, resolved, rung, ladder = _verify_count(cv, VERIFY_FRACTION * extra[0], tau, [extra[1]])
+                    count, resolved, rung, ladder, _ = _verify_count(cv, VERIFY_FRACTION * extra[0], tau, [extra[1]])
+                    conv_job[j] = False
+                    active[mine] = True
+            elif count_above is not None and count_above > _crossings(et[mine][ea[mine] <= above]):
+                # more crossings up to rel_tol above the answer than its known points bring: a
+                # branch the search missed there (continuation follows the neighbours' branches
+                # only), which a finer cut model can put below the answer (`TIE_TOL`): Newton
+                # from the multipliers nearest the circle at that depth, the new points refined
+                # with the others
+                a_r, t_r = _newton_from_nearest(cv, tau, above, DESCENT_POINTS, DESCENT_STARTS)
+                new = [(x, t) for x, t in zip(a_r, t_r) if VERIFY_FRACTION * top <= x <= above * (1.0 + REPAIR_SLACK)
+                       and not np.any((np.abs(ea[mine] - x) <= 1e-4 * x) & (np.abs(et[mine] - t) <= 1e-3))]
+                for x, t in new:
+                    add_j.append(j)
+                    add_a.append(float(x))
+                    add_t.append(float(t))
+                if new:
                     conv_job[j] = False
                     active[mine] = True
             if ladder is not None:
@@ -2098,7 +2155,7 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
         mine = np.flatnonzero(ej == j)
         lv = int(level_job[j])
         if len(mine) and (verify or hinted[j]) and not retry[j] and lv > vlevel:
-            count, resolved, rung, _ = _verify_count(char(s, lv, True), VERIFY_FRACTION * ea[mine].min(), tau_all[e], et[mine])
+            count, resolved, rung, _, _ = _verify_count(char(s, lv, True), VERIFY_FRACTION * ea[mine].min(), tau_all[e], et[mine])
             missed[j] = not (count == 0 and resolved and rung is None)
     # chatter frequencies, batched per (structure, resolution)
     wanted: dict = {}
