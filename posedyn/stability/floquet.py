@@ -1902,8 +1902,11 @@ def _batched_step(char, keeps, level, a, t, tau, owner, Gc, vec, full=False):
         def ch(lv, sel=sel):
             return _Batch([char(s, lv, full) if s in set(owner[sel].tolist()) else None for s in range(n_struct)], owner[sel])
 
-        v_in = None if vec is None or any(vec[i] is None for i in sel) else np.array([vec[i] for i in sel])
-        g_in = None if v_in is None else Gc[sel]
+        v_in, g_in = None, None
+        if vec is not None and any(vec[i] is not None for i in sel):  # a point without one (a repair, a branch found above) picks its own (NaN)
+            width = next(len(vec[i]) for i in sel if vec[i] is not None)
+            v_in = np.array([np.full(width, np.nan, complex) if vec[i] is None else vec[i] for i in sel])
+            g_in = np.where([vec[i] is None for i in sel], np.nan, Gc[sel])
         an, tn, okn, gn, vn = _step_level(ch, level, a[sel], t[sel], tau[sel], g_in, v_in)
         a_new[sel], t_new[sel], ok[sel], Gc_new[sel] = an, tn, okn, gn
         for k, i in enumerate(sel):
@@ -2209,10 +2212,15 @@ def _dedupe(a, t, rel: float = 1e-5, index: bool = False):
 
 def _step_level(char, level, a_prev, t_prev, tau, Gc, vec):
     """Newton at level + 1 from the boundary points of `level`: (a, theta folded to [0, pi],
-    converged, Gc, vec)."""
+    converged, Gc, vec). Rows of `vec` that are NaN (and None for all) take the eigenvector of
+    the eigenvalue nearest 1 / nu at `level`; rows of Gc that are NaN a difference."""
     taus = np.full(len(a_prev), tau)
     if vec is None:
         _, vec = _critical_log(char(level), a_prev, t_prev, taus)
+    elif not np.all(np.isfinite(vec)):  # the points without one: picked at this level, as above
+        missing = np.flatnonzero(~np.all(np.isfinite(vec), axis=1))
+        vec = vec.copy()
+        vec[missing] = _critical_log(char(level), a_prev[missing], t_prev[missing], taus[missing], idx=missing)[1]
     a_new, t_new, ok, Gc, vec = _newton(char(level + 1), a_prev, t_prev, taus, tol=REFINE_TOL, Gc=Gc, vec=vec)
     a_new = np.where(ok, a_new, a_prev)
     vec = np.where((t_new > np.pi)[:, None], np.conj(vec), vec)
