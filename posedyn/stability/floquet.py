@@ -116,7 +116,12 @@ and every mode at least 1 / SOFT_MODE as stiff as the cut is resolved (at most S
 of its periods in a cutting sub-step: before that the error is not yet monotone in the sub-step
 and two levels can agree by chance). A point Newton cannot follow to the next level is dropped
 where its job has others; a job none of whose points follows is solved again from the seeds at
-that level; a point at the finest level with no estimate takes it from one level down.
+that level; a point at the finest level with no estimate takes it from one level down. Which
+of two near points is the lowest (the chatter frequency) counts as settled only where their
+intervals, depth x (1 +- estimate), are apart or both estimates are below TIE_TOL; the
+verification's interpolant is made rel_tol above the answer, and where the count there exceeds
+the crossings of the known points, the branch the search missed is found (Newton from the
+nearest multipliers) and ranked with them.
 
 Dominant chatter frequency: as `chatter.chatter_frequencies` defines it (Dombovari et al. 2011):
 the Floquet solution at the critical point is exp(i theta t / tau) p(t) with p tau-periodic;
