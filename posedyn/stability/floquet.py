@@ -2094,15 +2094,18 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
                 # from the multipliers nearest the circle at that depth, the new points refined
                 # with the others
                 a_r, t_r = _newton_from_nearest(cv, tau, above, DESCENT_POINTS, DESCENT_STARTS)
-                new = [(x, t) for x, t in zip(a_r, t_r) if VERIFY_FRACTION * top <= x <= above * (1.0 + REPAIR_SLACK)
+                new = [(float(x), float(t)) for x, t in zip(a_r, t_r) if x <= above * (1.0 + REPAIR_SLACK)
                        and not np.any((np.abs(ea[mine] - x) <= 1e-4 * x) & (np.abs(et[mine] - t) <= 1e-3))]
                 for x, t in new:
                     add_j.append(j)
-                    add_a.append(float(x))
-                    add_t.append(float(t))
+                    add_a.append(x)
+                    add_t.append(t)
                 if new:
                     conv_job[j] = False
                     active[mine] = True
+                if new and new[0][0] < VERIFY_FRACTION * top:  # below the count's depth (an island the count could not see): verified there, as a repair
+                    repaired[j] = True
+                    count, resolved, rung, ladder, _ = _verify_count(cv, VERIFY_FRACTION * new[0][0], tau, [new[0][1]])
             if ladder is not None:
                 ladders[j] = (vlevel,) + ladder
             verified[j] = bool(count == 0 and resolved and rung is None)
