@@ -10,25 +10,11 @@ import numpy as np
 import pytest
 
 from absorber.chain import twin_pose_modes
-from posedyn.dynamics import ToolTipDynamics
 from posedyn.io.shipped import DATASETS
 from posedyn.io.twin_file import load_twin
-from posedyn.stability import Cut, critical_points, floquet
-from posedyn.table import Mode, PoseSet
-
-#: The issue-17 pose's modes (direction, fn_hz, zeta, k_n_per_m; tests/test_stability_multiscale.py).
-TABLE = [
-    ("x", 12.5909, 0.0300342, 2.11684e06),
-    ("x", 13.1342, 0.0305178, 9.91928e09),
-    ("x", 1443.92, 0.068509, 3.37558e07),
-    ("x", 5438.87, 0.0109756, 2.89553e07),
-    ("y", 12.6066, 0.0298721, 1.70046e07),
-    ("y", 13.1265, 0.030316, 910188.0),
-    ("y", 1479.59, 0.048235, 6.7942e07),
-    ("y", 5418.99, 0.0109107, 2.75146e07),
-]
-#: The sweep's cut (datasets/cuts/sweep_demo_cut.toml).
-CUT = Cut(teeth=3, kt_pa=796e6, kn_pa=169e6, radial_immersion=0.5, milling="down")
+from posedyn.stability import critical_points, floquet
+from posedyn.table import PoseSet
+from test_stability_multiscale import CUT, TABLE, structure  # the issue-17 pose's modes and the sweep's cut
 
 
 def test_of_two_nearly_tied_branches_the_converged_lowest_gives_the_frequency():
@@ -37,7 +23,7 @@ def test_of_two_nearly_tied_branches_the_converged_lowest_gives_the_frequency():
     their order is swapped, 0.03 % apart with error estimates of 0.8 %; the engine reported
     5524.0 Hz there. Now the job refines until the two error intervals part (or both are below
     TIE_TOL), and the answer is the converged branch's."""
-    dyn = ToolTipDynamics.from_modes(x=[Mode(f, z, k) for d, f, z, k in TABLE if d == "x"], y=[Mode(f, z, k) for d, f, z, k in TABLE if d == "y"])
+    dyn = structure(TABLE)
     rpm = 6775.919732441472
     fine = floquet.critical_depth(dyn, CUT, rpm, substeps_per_rad=64.0)
     assert fine.chatter_hz == pytest.approx(5376.9, rel=1e-4) and fine.depth_m * 1e3 == pytest.approx(3.3722, rel=1e-4)
