@@ -1414,7 +1414,7 @@ def _families(char, a, theta, tau, K, keep):
     # pose's shapes), summed over blocks of segments (at 512 sub-steps a radian the
     # (s, B, J, 2n) arrays reach GBs)
     coeff = np.zeros((B, len(j), P.shape[2]), dtype=complex)
-    for lo, hi in _blocks(s_count, 4 * B * len(j) * n2 * 16):
+    for lo, hi in _blocks(s_count, 4 * B * len(j) * n2 * lam.itemsize):  # x, e, g, GY
         x = lam[lo:hi, :, None, :] - 1j * omega[None, :, :, None]  # (s, B, J, 2n)
         # exp(x dt) = exp(lam dt) exp(-i omega dt), the second factor per (segment, speed, harmonic) only
         e = np.exp(lam[lo:hi] * dt[lo:hi, :, None])[:, :, None, :] * np.exp(-1j * omega[None] * dt[lo:hi, :, None])[:, :, :, None]
@@ -2077,35 +2077,31 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
             if (count > 0 or not resolved or rung is not None) and hinted[j]:
                 retry[j] = True
                 continue
+            found, lower = [], None  # boundary points to add to the job; the one below the count's depth
             if count > 0 or not resolved or rung is not None:  # a lower branch (below a Hopf rung's depth where one counts)
                 extra = _repair(cv, tau, top if rung is None else rung / VERIFY_FRACTION)
                 if extra is not None:
-                    repaired[j] = True
-                    add_j.append(j)
-                    add_a.append(extra[0])
-                    add_t.append(extra[1])
-                    count, resolved, rung, ladder, _ = _verify_count(cv, VERIFY_FRACTION * extra[0], tau, [extra[1]])
-                    conv_job[j] = False
-                    active[mine] = True
+                    found, lower = [extra], extra
             elif count_above is not None and count_above > _crossings(et[mine][ea[mine] <= above]):
                 # more crossings up to rel_tol above the answer than its known points bring: a
                 # branch the search missed there (continuation follows the neighbours' branches
                 # only), which a finer cut model can put below the answer (`TIE_TOL`): Newton
                 # from the multipliers nearest the circle at that depth, the new points refined
-                # with the others
+                # with the others (one below the count's depth, an island the count could not
+                # see, is verified there, as a repair)
                 a_r, t_r = _newton_from_nearest(cv, tau, above, DESCENT_POINTS, DESCENT_STARTS)
-                new = [(float(x), float(t)) for x, t in zip(a_r, t_r) if x <= above * (1.0 + REPAIR_SLACK)
-                       and not np.any((np.abs(ea[mine] - x) <= 1e-4 * x) & (np.abs(et[mine] - t) <= 1e-3))]
-                for x, t in new:
-                    add_j.append(j)
-                    add_a.append(x)
-                    add_t.append(t)
-                if new:
-                    conv_job[j] = False
-                    active[mine] = True
-                if new and new[0][0] < VERIFY_FRACTION * top:  # below the count's depth (an island the count could not see): verified there, as a repair
-                    repaired[j] = True
-                    count, resolved, rung, ladder, _ = _verify_count(cv, VERIFY_FRACTION * new[0][0], tau, [new[0][1]])
+                found = [(float(x), float(t)) for x, t in zip(a_r, t_r) if x <= above * (1.0 + REPAIR_SLACK)
+                         and not np.any((np.abs(ea[mine] - x) <= 1e-4 * x) & (np.abs(et[mine] - t) <= 1e-3))]
+                lower = found[0] if found and found[0][0] < VERIFY_FRACTION * top else None
+            if found:
+                add_j += [j] * len(found)
+                add_a += [x for x, _ in found]
+                add_t += [t for _, t in found]
+                conv_job[j] = False
+                active[mine] = True
+            if lower is not None:
+                repaired[j] = True
+                count, resolved, rung, ladder, _ = _verify_count(cv, VERIFY_FRACTION * lower[0], tau, [lower[1]])
             if ladder is not None:
                 ladders[j] = (vlevel,) + ladder
             verified[j] = bool(count == 0 and resolved and rung is None)
