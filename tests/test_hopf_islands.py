@@ -300,6 +300,20 @@ def test_the_repair_bisects_below_its_probes_when_every_probe_is_unstable():
     assert residual < 1e-6 and abs(r.depth_m / depth - 1.0) < 0.02
 
 
+def test_the_rungs_are_read_where_the_count_samples_m_directly():
+    """With 6 sub-steps in the engagement at the coarsest level (`coarsest_substeps`) the same job's
+    bisection ends at 23.1 mm, above the Hopf island at 6.3-14 mm. The verification at 49 a
+    radian samples M directly (its interpolants fail there) and used to skip the rungs: 23.26 mm
+    was reported verified, 3.7 times the exact 6.29 mm. The rungs now count on M as well."""
+    dyn = absorber_structure(NO_SEED_HOST, NO_SEED_ABSORBER)
+    base = floquet.coarsest_substeps(NO_SEED_CUT)
+    char = floquet.FloquetCharacteristic(dyn, NO_SEED_CUT, 4.0 * base)
+    tau = float(NO_SEED_CUT.tooth_period_s(NO_SEED_RPM))
+    count, resolved, rung, ladder, _ = floquet._verify_count(char, 0.995 * 23.26e-3, tau, [1.59])
+    assert (count, resolved, ladder) == (0, True, None)  # blind above the island, no interpolant
+    assert rung is not None and 6.3e-3 < rung < 14e-3 and floquet.unstable_count(char, rung, tau)[0] > 0
+
+
 #: A random absorber structure of a blind search with low immersion (2026-12-03, seed 23, case
 #: 954): 3 teeth in down milling at a/D 0.13, 574 rpm. The seeds found no boundary point, the
 #: repair found 1.26 mm on the coarse cut model (4 sub-steps a radian) and verified it there, where

@@ -310,9 +310,34 @@ def test_a_point_at_the_finest_level_estimates_its_error_one_level_down(monkeypa
     """Newton from the finest-level point one level down: the difference is the estimate (it
     bounds the finer value's error as a step up does). The answer converges and is verified; the
     independent time-domain simulation decays 5 % below it and grows 5 % above it. (The finest
-    level is held at 128, where the case was found; the default is now 512.)"""
+    level is held at 128 and the coarsest at 4 a radian, where the case was found; the defaults are
+    now 512 and, for this narrow cut, `coarsest_substeps`.)"""
     monkeypatch.setattr(floquet, "MAX_SUBSTEPS_PER_RAD", 128.0)
-    r = floquet.critical_depth(structure(FINEST_ROWS), FINEST_CUT, FINEST_RPM)
+    r = floquet.critical_depth(structure(FINEST_ROWS), FINEST_CUT, FINEST_RPM, substeps_per_rad=floquet.SUBSTEPS_PER_RAD)
     assert r.substeps_per_rad == 128.0
     assert r.verified and r.converged and r.rel_error_estimate < 0.01
     assert sim.grows_either_side(FINEST_ROWS, FINEST_CUT, FINEST_RPM, r.depth_m) == (False, True)
+
+
+#: Two random tables of the independent blind check (README), rounded as its report prints them:
+#: up milling at low immersion, where 4 sub-steps a radian put 3 in the engagement.
+NARROW_CASES = [
+    ([("x", 24.26, 0.04962, 3.105e6), ("x", 30.29, 0.04794, 3.193e6), ("x", 536.2, 0.05796, 4.24e7), ("x", 858.3, 0.04519, 1.152e7),
+      ("y", 42.36, 0.03792, 2.37e6), ("y", 10.68, 0.02308, 1.93e6), ("y", 1023.0, 0.01451, 6.04e6)],
+     Cut(teeth=3, kt_pa=869.4e6, kn_pa=280.6e6, radial_immersion=0.113, milling="up"), 2437.8),
+    ([("x", 10.7, 0.03025, 1.224e6), ("x", 1526.0, 0.04745, 4.189e7), ("y", 7.027, 0.03286, 9.989e6), ("y", 16.81, 0.05693, 7.145e6),
+      ("y", 2574.0, 0.04722, 4.732e7)],
+     Cut(teeth=2, kt_pa=718.8e6, kn_pa=172.3e6, radial_immersion=0.076, milling="up"), 1610.1),
+]
+
+
+@pytest.mark.parametrize("rows, cut, rpm", NARROW_CASES, ids=["S27", "S22"])
+def test_the_error_estimate_bounds_the_error_of_a_narrow_cut(rows, cut, rpm):
+    """The reported error estimate is at least the distance to the converged depth (the engine at
+    128-256 sub-steps a radian). With 3 sub-steps in the engagement at the coarsest level the
+    first two levels were pre-asymptotic: S27 0.67 % off with an estimate of 0.23 %, S22 0.10 %
+    with 0.04 %; `coarsest_substeps` puts at least 6 there."""
+    r = floquet.critical_depth(structure(rows), cut, rpm)
+    fine = floquet.critical_depth(structure(rows), cut, rpm, rel_tol=1e-4, substeps_per_rad=128.0)
+    assert r.converged and r.verified and fine.converged and abs(fine.chatter_hz / r.chatter_hz - 1.0) < 0.01
+    assert abs(r.depth_m / fine.depth_m - 1.0) <= r.rel_error_estimate
