@@ -115,14 +115,18 @@ decreases at least linearly in the sub-step length, so the difference bounds the
 finer value); the resolution doubles until the estimate is below rel_tol / 2
 and every mode at least 1 / SOFT_MODE as stiff as the cut is resolved (at most SUBSTEP_PERIODS
 of its periods in a cutting sub-step: before that the error is not yet monotone in the sub-step
-and two levels can agree by chance). A point Newton cannot follow to the next level is dropped
-where its job has others; a job none of whose points follows is solved again from the seeds at
-that level; a point at the finest level with no estimate takes it from one level down. Which
-of two near points is the lowest (the chatter frequency) counts as settled only where their
-intervals, depth x (1 +- estimate), are apart or both estimates are below TIE_TOL; the
-verification's interpolant is made rel_tol above the answer, and where the count there exceeds
-the crossings of the known points, the branch the search missed is found (Newton from the
-nearest multipliers) and ranked with them.
+and two levels can agree by chance). Stiffer modes can alias too (a random absorber structure, 2
+teeth at 524 rpm, spindle modes 14-90 times as stiff as the cut with 4-20 of their periods in a
+sub-step: 4 and 8 a radian agreed to 0.15 %, 16 moved the depth 1.8 %), so a job's lowest point
+is checked one level up when it converges (`look_ahead`: one Newton step there, one monodromy):
+the estimate is the larger of the two steps, and a step up above rel_tol / 2 takes the job on.
+A point Newton cannot follow to the next level is dropped where its job has others; a job none
+of whose points follows is solved again from the seeds at that level; a point at the finest level
+with no estimate takes it from one level down. Which of two near points is the lowest (the
+chatter frequency) counts as settled only where their intervals, depth x (1 +- estimate), are
+apart or both estimates are below TIE_TOL; the verification's interpolant is made rel_tol above
+the answer, and where the count there exceeds the crossings of the known points, the branch the
+search missed is found (Newton from the nearest multipliers) and ranked with them.
 
 Dominant chatter frequency: as `chatter.chatter_frequencies` defines it (Dombovari et al. 2011):
 the Floquet solution at the critical point is exp(i theta t / tau) p(t) with p tau-periodic;
@@ -1910,9 +1914,10 @@ def _level(substeps_per_rad: float, base: float) -> int:
     return int(round(np.log2(substeps_per_rad / base)))
 
 
-def _batched_step(char, keeps, level, a, t, tau, owner, Gc, vec, full=False):
-    """`_step_level` for boundary points of several structures (owner[i]), one batch per
-    matrix size."""
+def _batched_step(char, keeps, level, a, t, tau, owner, Gc, vec, full=False, step=None):
+    """`_step_level` (or `step`, the same signature) for boundary points of several structures
+    (owner[i]), one batch per matrix size."""
+    step = _step_level if step is None else step
     a_new, t_new = a.copy(), t.copy()
     ok = np.zeros(len(a), bool)
     Gc_new = np.zeros(len(a), complex)
@@ -1930,7 +1935,7 @@ def _batched_step(char, keeps, level, a, t, tau, owner, Gc, vec, full=False):
             width = next(len(vec[i]) for i in sel if vec[i] is not None)
             v_in = np.array([np.full(width, np.nan, complex) if vec[i] is None else vec[i] for i in sel])
             g_in = np.where([vec[i] is None for i in sel], np.nan, Gc[sel])
-        an, tn, okn, gn, vn = _step_level(ch, level, a[sel], t[sel], tau[sel], g_in, v_in)
+        an, tn, okn, gn, vn = step(ch, level, a[sel], t[sel], tau[sel], g_in, v_in)
         a_new[sel], t_new[sel], ok[sel], Gc_new[sel] = an, tn, okn, gn
         for k, i in enumerate(sel):
             vec_new[i] = vn[k]
@@ -2056,6 +2061,19 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
                 drop[mine[failed[mine]]] = True
         keep_only(np.flatnonzero(~drop))
         for j in refined[~lost[refined]]:
+            settle(j, level)
+        look_ahead([j for j in refined[~lost[refined]] if conv_job[j]])
+
+    def look_ahead(done):  # the lowest point of each job that has just converged, one step one level up: its error estimate the larger step, the job settled again with it
+        if not done or base * 2.0 ** (level + 1) > MAX_SUBSTEPS_PER_RAD:
+            return
+        low = np.array([mine[np.argmin(ea[mine])] for mine in (np.flatnonzero(ej == j) for j in done)])
+        v_in = None if vec is None else [vec[i] for i in low]
+        an, _, ok, _, _ = _batched_step(char, keeps, level, ea[low], et[low], etau[low], owner[low], Gc[low], v_in, step=_step_estimate)
+        err[low] = np.maximum(err[low], np.where(ok, np.abs(an - ea[low]) / an, np.inf))
+        for j in done:
+            conv_job[j] = False
+            active[ej == j] = True
             settle(j, level)
 
     def settle(j, lv):  # converged where the lowest (and near) points moved by less than rel_tol / 2, the lowest is known to be the lowest (TIE_TOL) and the cut model at lv resolves the soft modes
@@ -2248,6 +2266,18 @@ def _step_level(char, level, a_prev, t_prev, tau, Gc, vec):
     vec = np.where((t_new > np.pi)[:, None], np.conj(vec), vec)
     t_new = np.where(ok, np.where(t_new > np.pi, 2 * np.pi - t_new, t_new), t_prev)
     return a_new, t_new, ok, Gc, vec
+
+
+def _step_estimate(char, level, a_prev, t_prev, tau, Gc, vec):
+    """`_step_level` by one Newton step (one monodromy at level + 1, G_c of `level`): the depth
+    and theta to first order in the step, for an error estimate."""
+    taus = np.full(len(a_prev), tau)
+    if vec is None or not np.all(np.isfinite(vec)) or Gc is None or not np.all(np.isfinite(Gc)):
+        return _step_level(char, level, a_prev, t_prev, tau, Gc, vec)
+    g, vec = _critical_log(char(level + 1), a_prev, t_prev, taus, vec=vec)
+    step, _, _, bad = _newton_step(a_prev, t_prev, Gc, g)
+    ok = ~bad & np.isfinite(g) & np.all(np.isfinite(step), axis=1)
+    return np.where(ok, a_prev + step[:, 0], a_prev), np.where(ok, t_prev + step[:, 1], t_prev), ok, Gc, vec
 
 
 def _repair(char, tau, a_top):
