@@ -15,6 +15,7 @@ import pytest
 import independent_milling_sim as sim
 from absorber.coupling import with_absorber
 from posedyn.dynamics import ToolTipDynamics
+from posedyn.io import read_modal_table
 from posedyn.stability import Cut, Discretization, StabilityModel, critical, critical_lobes, critical_points, floquet
 from posedyn.table import Mode
 
@@ -356,3 +357,30 @@ def test_the_error_estimate_bounds_the_error(rows, absorber, cut, rpm):
     fine = floquet.critical_depth(dyn, cut, rpm, rel_tol=1e-4, substeps_per_rad=128.0)
     assert r.converged and r.verified and fine.converged and abs(fine.chatter_hz / r.chatter_hz - 1.0) < 0.01
     assert abs(r.depth_m / fine.depth_m - 1.0) <= r.rel_error_estimate
+
+
+#: The independent cross-coupled check (README; a helper's own RK4 Floquet solver, never reading
+#: the engine), case L00: 4 teeth at 242.9 rpm, a/D 0.0265, down milling, coupled non-symmetric
+#: 66 Hz and 575 Hz modes, 5.9 / 5.1 kHz spindle modes 6.5-7.5 times as stiff as the cut. Its
+#: bisected boundary is 2.5634 mm; the engine at 512 sub-steps a radian says 2.5613 mm.
+L00_TABLE = """pose_id,x_mm,y_mm,z_mm,beta_deg,direction,mode,fn_hz,zeta,k_n_per_m,k_xy_n_per_m,k_yx_n_per_m
+P,1000,0,800,0,x,1,66.00949540471824,0.01650925712693344,381983.9276439074,1866331.058815217,
+P,1000,0,800,0,y,1,66.00949540471824,0.01650925712693344,5215154.941214912,,1067391.2103147598
+P,1000,0,800,0,x,2,574.5829420443173,0.06623637561371058,13202293.213178094,11174399.447018735,
+P,1000,0,800,0,y,2,574.5829420443173,0.06623637561371058,15444241.904093305,,18247012.82962378
+P,1000,0,800,0,x,3,5947.736608098552,0.007129951250892967,7924807.638274668,,
+P,1000,0,800,0,x,4,6.127923698991357,0.059301042431117945,6674667.593424705,,
+P,1000,0,800,0,y,3,5140.95363484979,0.006145237830767924,6776754.005188865,,
+"""
+
+
+@pytest.mark.xfail(strict=True, reason="open (2026-12-03): 18, 37 and 73 sub-steps a radian agree to 0.16 % on a branch that finer "
+                   "cut models move 2.4 % up; the spindle modes are stiffer than SOFT_MODE x the cut, so no level must resolve them")
+def test_the_low_speed_coupled_case_of_the_independent_check_is_within_2_percent(tmp_path):
+    path = tmp_path / "l00.csv"
+    path.write_text(L00_TABLE)
+    dyn = ToolTipDynamics.from_table(read_modal_table(path), "P")
+    cut = Cut(teeth=4, kt_pa=414.9832187759948e6, kn_pa=65.92270542889385e6, radial_immersion=0.026533118904854602, milling="down")
+    r = floquet.critical_depth(dyn, cut, 242.87758485978134)
+    assert r.converged and r.verified
+    assert abs(r.depth_m / 2.5634e-3 - 1.0) <= min(0.02, max(r.rel_error_estimate, 1e-3))
