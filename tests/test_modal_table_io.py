@@ -17,6 +17,9 @@ GOOD = [
 ]
 
 
+CROSS = ",k_xy_n_per_m,k_yx_n_per_m"
+
+
 def csv_text(header=HEADER, rows=GOOD):
     return "\n".join([header] + rows) + "\n"
 
@@ -134,6 +137,14 @@ BAD_CELLS = {
     "inconsistent orientation": (csv_text(rows=GOOD + ["B,300,200,300,31,y,1,30,0.03,1e6"]), 4, "beta_deg", "as in row 3"),
     "empty pose_id": (replace(0, "pose_id", ""), 1, "pose_id", "non-empty"),
     "ragged row": (csv_text(rows=GOOD[:1] + ["A,100,200"]), 2, None, "fields"),
+    # a cross term alone would be dropped (the mode read as uncoupled): the independent check's
+    # tables were accepted that way without a word
+    "cross term on one row only": (csv_text(HEADER + CROSS, [GOOD[0] + ",-4e6,", GOOD[1] + ",,", GOOD[2] + ",,"]), 1, "k_xy_n_per_m",
+                                   "k_yx_n_per_m on the y row of pose 'A', mode 1 as well"),
+    "cross term without its row": (csv_text(HEADER + CROSS, [GOOD[0] + ",,", GOOD[1] + ",,", GOOD[2] + ",5e6,"]), 3, "k_xy_n_per_m",
+                                   "k_yx_n_per_m on the y row of pose 'B', mode 1 as well"),
+    "cross term on the other direction's row": (csv_text(HEADER + CROSS, [GOOD[0] + ",-4e6,", GOOD[1] + ",-3e6,-5e6", GOOD[2] + ",,"]), 2,
+                                                "k_xy_n_per_m", "k_xy_n_per_m on x rows only"),
 }
 
 

@@ -74,6 +74,24 @@ def parse_modal_table(data: bytes | str, name: str = "<table>") -> ModalTable:
         raise exc.located(file=name) from None
 
 
+#: A cross term's row and the row that carries its partner: k_xy (x response to a y force) on an
+#: x row, k_yx on the y row of the same pose and mode number (one coupled mode, `ToolTipDynamics.from_table`).
+_CROSS_ROWS = {"k_xy_n_per_m": ("x", "y", "k_yx_n_per_m"), "k_yx_n_per_m": ("y", "x", "k_xy_n_per_m")}
+
+
+def _check_cross_pairs(coupled: dict) -> None:
+    """Every cross term on its own direction's row, with its partner on the other row of the same
+    pose and mode (one alone would be dropped: the mode is then read as uncoupled)."""
+    for (pose_id, direction, mode), (at, filled) in coupled.items():
+        for column in sorted(filled):
+            own, other, partner = _CROSS_ROWS[column]
+            if direction != own:
+                raise InputError(f"{column} on {own} rows only (empty on {direction} rows)", got=f"{pose_id}/{direction}/{mode}", column=column, **at)
+            if partner not in coupled.get((pose_id, other, mode), (None, set()))[1]:
+                raise InputError(f"{partner} on the {other} row of pose '{pose_id}', mode {mode} as well (a coupled mode carries both cross terms)",
+                                 got="none", column=column, **at)
+
+
 def write_modal_table(table: ModalTable, path: str | os.PathLike) -> None:
     """Write atomically (temporary file in the same folder, then rename)."""
     write_text_atomic(path, format_modal_table(table))
@@ -199,6 +217,7 @@ class _Parser:
         std = {c: [] for c in std_columns}
         cross = {c: [] for c in cross_columns}
         source = []
+        coupled: dict[tuple, tuple] = {}  # (pose_id, direction, mode) -> (where, the cross columns it fills)
         for number, line, cells in rows:
             at = dict(row=number, line=line)
             pose_id = cells["pose_id"]
@@ -244,8 +263,10 @@ class _Parser:
                 if value == 0:
                     raise InputError("empty or a non-zero modal stiffness", got=cells[c], column=c, **at)
                 cross[c].append(value)
+            coupled[(pose_id, direction, mode)] = (at, {c for c in cross_columns if not math.isnan(cross[c][-1])})
             if "source" in columns:
                 source.append(cells["source"])
+        _check_cross_pairs(coupled)
 
         poses = PoseSet(
             pose_id=tuple(pose_ids),
