@@ -79,15 +79,15 @@ def parse_modal_table(data: bytes | str, name: str = "<table>") -> ModalTable:
 _CROSS_ROWS = {"k_xy_n_per_m": ("x", "y", "k_yx_n_per_m"), "k_yx_n_per_m": ("y", "x", "k_xy_n_per_m")}
 
 
-def _check_cross_pairs(coupled: dict) -> None:
+def _check_cross_pairs(cross_rows: dict) -> None:
     """Every cross term on its own direction's row, with its partner on the other row of the same
     pose and mode (one alone would be dropped: the mode is then read as uncoupled)."""
-    for (pose_id, direction, mode), (at, filled) in coupled.items():
+    for (pose_id, direction, mode), (at, filled) in cross_rows.items():
         for column in sorted(filled):
             own, other, partner = _CROSS_ROWS[column]
             if direction != own:
                 raise InputError(f"{column} on {own} rows only (empty on {direction} rows)", got=f"{pose_id}/{direction}/{mode}", column=column, **at)
-            if partner not in coupled.get((pose_id, other, mode), (None, set()))[1]:
+            if partner not in cross_rows.get((pose_id, other, mode), (None, set()))[1]:
                 raise InputError(f"{partner} on the {other} row of pose '{pose_id}', mode {mode} as well (a coupled mode carries both cross terms)",
                                  got="none", column=column, **at)
 
@@ -217,7 +217,7 @@ class _Parser:
         std = {c: [] for c in std_columns}
         cross = {c: [] for c in cross_columns}
         source = []
-        coupled: dict[tuple, tuple] = {}  # (pose_id, direction, mode) -> (where, the cross columns it fills)
+        cross_rows: dict[tuple, tuple] = {}  # (pose_id, direction, mode) -> (where, the cross columns it fills)
         for number, line, cells in rows:
             at = dict(row=number, line=line)
             pose_id = cells["pose_id"]
@@ -263,10 +263,10 @@ class _Parser:
                 if value == 0:
                     raise InputError("empty or a non-zero modal stiffness", got=cells[c], column=c, **at)
                 cross[c].append(value)
-            coupled[(pose_id, direction, mode)] = (at, {c for c in cross_columns if not math.isnan(cross[c][-1])})
+            cross_rows[(pose_id, direction, mode)] = (at, {c for c in cross_columns if not math.isnan(cross[c][-1])})
             if "source" in columns:
                 source.append(cells["source"])
-        _check_cross_pairs(coupled)
+        _check_cross_pairs(cross_rows)
 
         poses = PoseSet(
             pose_id=tuple(pose_ids),
