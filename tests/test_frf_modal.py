@@ -173,3 +173,34 @@ def test_pose_model_learns_cross_coupling_and_predicts_coupled_modes():
     assert np.allclose(predicted.cross["k_xy_n_per_m"][::2], -4e6 / scale, rtol=0.02)
     dyn = ToolTipDynamics.from_table(predicted, "p3")
     assert dyn.n_modes == 1 and dyn.frf(np.array([1.0]))[0, 0, 1].real < 0  # negative cross term
+
+
+def test_a_predicted_coupled_mode_is_one_rank_one_mode_that_the_parser_reads_back():
+    """The pose model predicts fn, zeta and k of a coupled mode's x and y rows independently; the
+    predicted table makes them one rank-one mode (means, k_yy = k_xy k_yx / k_xx), as the engine
+    reads it, so that the table written by `posedyn predict` passes the parser's consistency
+    check, here far outside the training poses (independently, k_yy drifted 2.5x there)."""
+    from posedyn.io import format_modal_table, parse_modal_table
+    from posedyn.posemodel import PoseModel
+    from posedyn.table import ModalTable, PoseSet
+
+    n = 8
+    x = np.linspace(1300, 1900, n)
+    scale = 1 + 0.3 * (x - 1300) / 600
+    poses = PoseSet(tuple(f"p{i}" for i in range(n)), np.column_stack([x, np.zeros(n), np.full(n, 600.0)]), "beta", np.zeros((n, 1)))
+    rows = dict(pose_index=np.repeat(np.arange(n), 2), direction=["x", "y"] * n, mode=[1, 1] * n)
+    table = ModalTable(
+        poses=poses, fn_hz=np.ravel(np.column_stack([12.0 / np.sqrt(scale), 12.2 / np.sqrt(scale)])), zeta=np.tile([0.03, 0.035], n),
+        k_n_per_m=np.full(2 * n, 2e6) * np.repeat(scale, 2),
+        cross={"k_xy_n_per_m": np.ravel(np.column_stack([-4e6 * scale, np.full(n, np.nan)])), "k_yx_n_per_m": np.ravel(np.column_stack([np.full(n, np.nan), -1e6 / scale]))},
+        **rows,
+    )
+    far = np.linspace(400, 2800, 7)
+    model = PoseModel("stgp").fit(table)
+    predicted = model.predict_table(PoseSet(tuple(f"q{i}" for i in range(len(far))), np.column_stack([far, np.zeros(len(far)), np.full(len(far), 600.0)]),
+                                            "beta", np.zeros((len(far), 1))))
+    xr, yr = predicted.direction == "x", predicted.direction == "y"
+    assert np.allclose(predicted.fn_hz[xr], predicted.fn_hz[yr]) and np.allclose(predicted.zeta[xr], predicted.zeta[yr])
+    assert np.allclose(predicted.k_n_per_m[yr], predicted.cross["k_xy_n_per_m"][xr] * predicted.cross["k_yx_n_per_m"][yr] / predicted.k_n_per_m[xr])
+    back = parse_modal_table(format_modal_table(predicted), "predicted.csv")
+    assert np.array_equal(back.k_n_per_m, predicted.k_n_per_m)

@@ -118,6 +118,19 @@ def replace(row_index, column, value, rows=GOOD, header=HEADER):
     return csv_text(header, rows)
 
 
+#: One coupled rank-one mode: k_yy = k_xy k_yx / k_xx = (-4e6)(-5e5) / 1e6 = 2e6.
+COUPLED = ["A,100,200,300,0,x,1,20.0,0.03,1e6,-4e6,", "A,100,200,300,0,y,1,{fn_hz},{zeta},{k_n_per_m},,{k_yx}"]
+
+
+def coupled(fn_hz="20.5", zeta="0.035", k_n_per_m="2.2e6", k_yx="-5e5"):
+    return csv_text(HEADER + CROSS, [COUPLED[0], COUPLED[1].format(fn_hz=fn_hz, zeta=zeta, k_n_per_m=k_n_per_m, k_yx=k_yx)])
+
+
+def test_a_coupled_mode_within_the_tolerances_is_read_as_one_mode():
+    table = parse(coupled())
+    assert table.cross["k_yx_n_per_m"][1] == -5e5 and table.fn_hz[1] == 20.5
+
+
 # Each bad input: (text, row, line, column, words expected in the message).
 BAD_CELLS = {
     "non-numeric cell": (replace(1, "fn_hz", "twenty"), 2, "fn_hz", "expected a number"),
@@ -145,6 +158,12 @@ BAD_CELLS = {
                                    "k_yx_n_per_m on the y row of pose 'B', mode 1 as well"),
     "cross term on the other direction's row": (csv_text(HEADER + CROSS, [GOOD[0] + ",-4e6,", GOOD[1] + ",-3e6,-5e6", GOOD[2] + ",,"]), 2,
                                                 "k_xy_n_per_m", "k_xy_n_per_m on x rows only"),
+    # the two rows of a coupled mode are one rank-one mode (fn and zeta averaged, k_yy derived):
+    # rows further apart than that would be read silently wrong
+    "coupled rows' fn apart": (coupled(fn_hz="22.0"), 2, "fn_hz", "fn_hz within 5% of 20.0 (row 1, the x row of the same coupled mode"),
+    "coupled rows' zeta apart": (coupled(zeta="0.07"), 2, "zeta", "zeta within a factor 2 of 0.03"),
+    "coupled y stiffness not rank one": (coupled(k_n_per_m="5e6"), 2, "k_n_per_m", "within a factor 2 of k_xy k_yx / k_xx = 2e+06"),
+    "coupled cross terms of opposite signs": (coupled(k_yx="5e5"), 2, "k_yx_n_per_m", "k_yx_n_per_m of the sign of k_xy_n_per_m"),
 }
 
 

@@ -79,17 +79,42 @@ def parse_modal_table(data: bytes | str, name: str = "<table>") -> ModalTable:
 _CROSS_ROWS = {"k_xy_n_per_m": ("x", "y", "k_yx_n_per_m"), "k_yx_n_per_m": ("y", "x", "k_xy_n_per_m")}
 
 
+#: The two rows of a coupled mode describe one rank-one mode (`ToolTipDynamics.from_table` averages
+#: their fn and zeta and derives the y row's direct stiffness, k_yy = k_xy k_yx / k_xx): rows further
+#: apart than this are two modes, or a fit that is not rank one, and would be read silently wrong.
+COUPLED_FN_TOL = 0.05  # relative difference of the two rows' fn
+COUPLED_ZETA_RATIO = 2.0  # largest ratio of their zeta
+COUPLED_K_RATIO = 2.0  # largest ratio of the y row's k to k_xy k_yx / k_xx
+
+
 def _check_cross_pairs(cross_rows: dict) -> None:
     """Every cross term on its own direction's row, with its partner on the other row of the same
-    pose and mode (one alone would be dropped: the mode is then read as uncoupled)."""
-    for (pose_id, direction, mode), (at, filled) in cross_rows.items():
+    pose and mode (one alone would be dropped: the mode is then read as uncoupled), and the two
+    rows of a coupled mode consistent with one rank-one mode (COUPLED_FN_TOL, COUPLED_ZETA_RATIO,
+    COUPLED_K_RATIO)."""
+    for (pose_id, direction, mode), (at, filled, _) in cross_rows.items():
         for column in sorted(filled):
             own, other, partner = _CROSS_ROWS[column]
             if direction != own:
                 raise InputError(f"{column} on {own} rows only (empty on {direction} rows)", got=f"{pose_id}/{direction}/{mode}", column=column, **at)
-            if partner not in cross_rows.get((pose_id, other, mode), (None, set()))[1]:
+            if partner not in cross_rows.get((pose_id, other, mode), (None, set(), None))[1]:
                 raise InputError(f"{partner} on the {other} row of pose '{pose_id}', mode {mode} as well (a coupled mode carries both cross terms)",
                                  got="none", column=column, **at)
+        if direction == "y" and filled:
+            x_at, _, (fn_x, zeta_x, k_x, k_xy) = cross_rows[(pose_id, "x", mode)]
+            fn_y, zeta_y, k_y, k_yx = cross_rows[(pose_id, direction, mode)][2]
+            one = f"(row {x_at['row']}, the x row of the same coupled mode: one rank-one mode)"
+            if abs(fn_y - fn_x) > COUPLED_FN_TOL * 0.5 * (fn_x + fn_y):
+                raise InputError(f"fn_hz within {COUPLED_FN_TOL:.0%} of {fn_x!r} {one}", got=repr(fn_y), column="fn_hz", **at)
+            if max(zeta_x / zeta_y, zeta_y / zeta_x) > COUPLED_ZETA_RATIO:
+                raise InputError(f"zeta within a factor {COUPLED_ZETA_RATIO:g} of {zeta_x!r} {one}", got=repr(zeta_y), column="zeta", **at)
+            rank_one = k_xy * k_yx / k_x
+            if not rank_one > 0:
+                raise InputError(f"k_yx_n_per_m of the sign of k_xy_n_per_m, {k_xy!r} {one}: the y direct stiffness k_xy k_yx / k_xx is > 0",
+                                 got=repr(k_yx), column="k_yx_n_per_m", **at)
+            if max(k_y / rank_one, rank_one / k_y) > COUPLED_K_RATIO:
+                raise InputError(f"k_n_per_m within a factor {COUPLED_K_RATIO:g} of k_xy k_yx / k_xx = {rank_one:.6g} {one}",
+                                 got=repr(k_y), column="k_n_per_m", **at)
 
 
 def write_modal_table(table: ModalTable, path: str | os.PathLike) -> None:
@@ -217,7 +242,7 @@ class _Parser:
         std = {c: [] for c in std_columns}
         cross = {c: [] for c in cross_columns}
         source = []
-        cross_rows: dict[tuple, tuple] = {}  # (pose_id, direction, mode) -> (where, the cross columns it fills)
+        cross_rows: dict[tuple, tuple] = {}  # (pose_id, direction, mode) -> (where, the cross columns it fills, (fn, zeta, k, its own cross term))
         for number, line, cells in rows:
             at = dict(row=number, line=line)
             pose_id = cells["pose_id"]
@@ -263,7 +288,9 @@ class _Parser:
                 if value == 0:
                     raise InputError("empty or a non-zero modal stiffness", got=cells[c], column=c, **at)
                 cross[c].append(value)
-            cross_rows[(pose_id, direction, mode)] = (at, {c for c in cross_columns if not math.isnan(cross[c][-1])})
+            filled = {c for c in cross_columns if not math.isnan(cross[c][-1])}
+            own_cross = next((cross[c][-1] for c in filled if _CROSS_ROWS[c][0] == direction), math.nan)
+            cross_rows[(pose_id, direction, mode)] = (at, filled, (fn, zeta, k, own_cross))
             if "source" in columns:
                 source.append(cells["source"])
         _check_cross_pairs(cross_rows)

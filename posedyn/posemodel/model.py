@@ -352,7 +352,27 @@ class PoseModel:
                 for c in cross_names:
                     j = index.get(target_name(d, m, c))
                     cross[c].append(mean[p, j] if j is not None else np.nan)
+        _one_mode_per_coupled_pair(rows, cross)
         return ModalTable(poses=poses, std=stds, source=("predicted by posedyn " + self.method,) * len(rows["fn_hz"]), cross=cross, **rows)
+
+
+def _one_mode_per_coupled_pair(rows: dict, cross: dict) -> None:
+    """In place: the two rows of a predicted coupled mode (k_xy on the x row, k_yx on the y row)
+    made one rank-one mode, as `ToolTipDynamics.from_table` reads it and the table parser checks:
+    fn and zeta their means, the y row's stiffness k_xy k_yx / k_xx (predicted independently, it
+    drifted 2.5x from that away from the training poses)."""
+    if not {"k_xy_n_per_m", "k_yx_n_per_m"} <= set(cross):
+        return
+    at = {(p, d, m): i for i, (p, d, m) in enumerate(zip(rows["pose_index"], rows["direction"], rows["mode"]))}
+    for (p, d, m), i in at.items():
+        j = at.get((p, "y", m))
+        if d != "x" or j is None or not (np.isfinite(cross["k_xy_n_per_m"][i]) and np.isfinite(cross["k_yx_n_per_m"][j])):
+            continue
+        for param in ("fn_hz", "zeta"):
+            rows[param][i] = rows[param][j] = 0.5 * (rows[param][i] + rows[param][j])
+        rank_one = cross["k_xy_n_per_m"][i] * cross["k_yx_n_per_m"][j] / rows["k_n_per_m"][i]
+        if rank_one > 0:
+            rows["k_n_per_m"][j] = rank_one
 
 
 def r2_score(predicted: np.ndarray, actual: np.ndarray) -> float:
