@@ -120,12 +120,16 @@ teeth at 524 rpm, spindle modes 14-90 times as stiff as the cut with 4-20 of the
 sub-step: 4 and 8 a radian agreed to 0.15 %, 16 moved the depth 1.8 %), so a job's lowest point
 is checked one level up when it converges (`look_ahead`: one Newton step there, one monodromy):
 the estimate is the larger of the two steps, and a step up above rel_tol / 2 takes the job on.
-Where a mode r > SOFT_MODE times as stiff as the cut has more than SUBSTEP_PERIODS r / SOFT_MODE
-of its periods in a sub-step (the softer, the finer it must be resolved), that step is taken at
-the first level that resolves it so (the independent check's L00: 4 teeth at 243 rpm, a/D 0.027,
-5.1-5.9 kHz modes 6.5-7.5 times as stiff as the cut, 3 periods a sub-step at 73 a radian: 18, 37
-and 73 agreed to 0.16 %, 147 took the branch away and the answer was 2.4 % too shallow); requiring
-the whole convergence there instead cost 32 % more on the bench sweep, whose rows it left alone.
+Where a mode at most ALIAS_MODE times as stiff as the cut has more than ALIAS_PERIODS of its
+periods in a sub-step (below the Nyquist rate), that step is taken at the first level that
+resolves it so, and where that is more than one level up and the step could raise the estimate,
+Newton goes to the root there (one step went 0.42 % where the root was 0.83 % away). Seen in the
+independent checks: L00 (4 teeth at 243 rpm, a/D 0.027, 5.1-5.9 kHz modes 6.5-7.5 times as stiff
+as the cut, 3 periods a sub-step at 73 a radian): 18, 37 and 73 agreed to 0.16 %, 147 took the
+branch away, the answer was 2.4 % too shallow; H02 (6 teeth at 252 rpm, a 6.72 kHz mode 16 times
+as stiff that chatters): its sub-step was near a whole number of its periods at the first five
+levels (15.5 down to 0.97), which all converged to a depth 0.83 % too deep. Requiring the whole
+convergence at such a level instead cost 32 % more on the bench sweep, whose rows it left alone.
 A point Newton cannot follow to the next level is dropped where its job has others; a job none
 of whose points follows is solved again from the seeds at that level; a point at the finest level
 with no estimate takes it from one level down. Which of two near points is the lowest (the
@@ -168,10 +172,12 @@ from posedyn.stability.cutting import Cut, engaged_integral, mean_force_matrix
 #: below their estimates (+0.003 % at most) at the same cost.
 SUBSTEPS_PER_RAD = 4.0
 MIN_ENGAGED_SUBSTEPS = 6
-#: Finest level tried (sub-steps per radian) before giving up on rel_tol. A mode must fit in a
+#: Finest level tried before giving up on rel_tol: the first at or above this many sub-steps per
+#: radian (`_top_level`; the levels double from the coarsest, so 512-1023). A mode must fit in a
 #: cutting sub-step at most once (SUBSTEP_PERIODS) before a level's estimate counts: 10 kHz at 200
 #: rpm needs 480 a radian (at 128, 22 of 24 flagged low-speed answers of a blind search could not
-#: converge; some were 75 % off).
+#: converge; some were 75 % off). With the last level below it, 317 a radian was the finest from a
+#: coarsest of 19.8, and an 8.65 kHz mode at 239 rpm (it needs 346) could never converge.
 MAX_SUBSTEPS_PER_RAD = 512.0
 #: Modes with peak compliance below this fraction of the largest are left out of the search.
 IRRELEVANT = 1e-3
@@ -199,6 +205,11 @@ BAND_WIDEN = 3.0
 #: Shallow chatter (issue 17: the cut a twentieth of the spindle's stiffness) is not affected.
 SOFT_MODE = 5.0
 SUBSTEP_PERIODS = 1.0
+#: Aliasing guard of the look-ahead (`look_ahead`, `unresolved(look=True)`): a mode at most
+#: ALIAS_MODE times as stiff as the cut, with more than ALIAS_PERIODS of its periods in a sub-step,
+#: can make levels agree on a wrong depth (by 2.4 % at 7 times, 0.8 % at 16 in the independent checks).
+ALIAS_MODE = 20.0
+ALIAS_PERIODS = 0.5
 #: Newton tolerance (relative step) of the refinements after the seed search.
 REFINE_TOL = 1e-4
 #: Seed pruning: (iteration, |g|) pairs; a seed with |g| above the bound at or after the
@@ -406,18 +417,20 @@ class FloquetCharacteristic:
             self._free_eig_inv = np.linalg.inv(self.free_eig()[1])
         return self._free_eig_inv
 
-    def unresolved(self, a: float, tau: float, graded: bool = False, finer: int = 0) -> bool:
+    def unresolved(self, a: float, tau: float, look: bool = False, finer: int = 0) -> bool:
         """Whether a free mode at least 1 / SOFT_MODE as stiff at the tool tip as the cut at depth
         a (m) vibrates more than SUBSTEP_PERIODS periods in this model's longest cutting sub-step
         (tooth period tau): its answer is not yet in the asymptotic range of the resolution.
-        `graded`: also a stiffer mode, k_mode / k_cut = r > SOFT_MODE, with more than
-        SUBSTEP_PERIODS r / SOFT_MODE periods in a sub-step (`look_ahead`); `finer`: at the
-        resolution that many levels up (sub-steps 2^-finer as long)."""
+        `look`: whether a mode at most ALIAS_MODE as stiff has more than ALIAS_PERIODS periods
+        in a sub-step (`look_ahead`); `finer`: at the resolution that many levels up (sub-steps
+        2^-finer as long)."""
         lam, left, right = self.residues()
         with np.errstate(all="ignore"):  # static tool-tip compliance of each eigen-pair, 2 |R_k| / |lam_k|
             compliance = 2.0 * np.linalg.norm(left, axis=0) * np.linalg.norm(right, axis=1) / np.abs(lam)
-            ratio = 1.0 / (SOFT_MODE * compliance * a * np.hypot(self.cut.kt_pa, self.cut.kn_pa))  # r / SOFT_MODE
-            allowed = SUBSTEP_PERIODS * np.where(ratio <= 1.0, 1.0, ratio if graded else np.inf)
+            ratio = 1.0 / (compliance * a * np.hypot(self.cut.kt_pa, self.cut.kn_pa))  # k_mode / k_cut
+            allowed = np.where(ratio <= SOFT_MODE, SUBSTEP_PERIODS, np.inf)
+            if look:
+                allowed = np.where(ratio <= ALIAS_MODE, np.minimum(allowed, ALIAS_PERIODS), allowed)
         substep = tau * (self.fraction[self.cutting].max() if self.cutting.any() else 0.0) / 2.0**finer
         return bool(np.any(np.abs(lam.imag) / (2.0 * np.pi) * substep > allowed))
 
@@ -692,11 +705,18 @@ def _flip_scan(char, a: np.ndarray, tau: np.ndarray):
     below -1 and Re sigma + 1 of the multiplier nearest -1, both (jobs, points); one real batch."""
     jobs, points = a.shape
     with np.errstate(all="ignore"):
-        sigma = np.linalg.eigvals(char.monodromy(2.0 * a.ravel(), np.repeat(tau, points)))
+        M = char.monodromy(2.0 * a.ravel(), np.repeat(tau, points))
+    finite = np.all(np.isfinite(M), axis=(1, 2))  # an overflowing M (depths far past every boundary): no multipliers
+    sigma = np.full(M.shape[:2], np.nan, dtype=complex)
+    sigma[finite] = np.linalg.eigvals(M[finite])
     real = np.abs(sigma.imag) <= 1e-9 * np.maximum(np.abs(sigma), 1e-300)
     below = (real & (sigma.real < -1.0)).sum(axis=1).reshape(jobs, points)
-    nearest = sigma[np.arange(len(sigma)), np.argmin(np.abs(sigma + 1.0), axis=1)].real.reshape(jobs, points) + 1.0
-    return below, nearest
+    known = finite.reshape(jobs, points)
+    last = np.maximum.accumulate(np.where(known, np.arange(points)[None, :], 0), axis=1)  # where nothing is known, the last known count: no crossing
+    below = np.take_along_axis(below, last, axis=1)
+    nearest = np.full(len(sigma), np.nan)
+    nearest[finite] = sigma[finite][np.arange(finite.sum()), np.argmin(np.abs(sigma[finite] + 1.0), axis=1)].real + 1.0
+    return below, nearest.reshape(jobs, points)
 
 
 def _flip_grid(a_scale, top: float) -> np.ndarray:
@@ -1843,7 +1863,7 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
                         if hit[q]:
                             break
         for q, j in zip(np.flatnonzero(hit), group[hit]):
-            if points[j].substeps_per_rad < MAX_SUBSTEPS_PER_RAD:
+            if _level(points[j].substeps_per_rad, base) < _top_level(base):
                 solve_lower(j, points[j].substeps_per_rad, (inside[q], np.pi) if np.isfinite(inside[q]) else None)
             else:  # an island no finer model can be asked about: the answer is known to be too high
                 points[j] = dataclasses.replace(points[j], verified=False)
@@ -1922,6 +1942,11 @@ def _fold(theta: float) -> float:
 def _level(substeps_per_rad: float, base: float) -> int:
     """The refinement level of a resolution: substeps_per_rad = base x 2^level."""
     return int(round(np.log2(substeps_per_rad / base)))
+
+
+def _top_level(base: float) -> int:
+    """The finest refinement level: the first at or above MAX_SUBSTEPS_PER_RAD."""
+    return int(np.ceil(np.log2(MAX_SUBSTEPS_PER_RAD / base) - 1e-9))
 
 
 def _batched_step(char, keeps, level, a, t, tau, owner, Gc, vec, full=False, step=None):
@@ -2074,18 +2099,24 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
             settle(j, level)
         look_ahead([j for j in refined[~lost[refined]] if conv_job[j]])
 
-    def look_ahead(done):  # the lowest point of each job that has just converged, one step one level up (or up to where its stiff modes are resolved, graded): its error estimate the larger step, the job settled again with it
-        top = _level(MAX_SUBSTEPS_PER_RAD, base)
+    def look_ahead(done):  # the lowest point of each job that has just converged, one step one level up (or up to where its stiff modes are not aliased): its error estimate the larger step, the job settled again with it
+        top = _top_level(base)
         if not done or level + 1 > top:
             return
         low = np.array([mine[np.argmin(ea[mine])] for mine in (np.flatnonzero(ej == j) for j in done)])
-        ahead = np.array([next((lv for lv in range(level + 1, top) if not char(jobs[ej[i]][0], level, True).unresolved(ea[i], etau[i], True, lv - level)), top)
+        ahead = np.array([next((lv for lv in range(level + 1, top) if not char(jobs[ej[i]][0], level, True).unresolved(ea[i], etau[i], look=True, finer=lv - level)), top)
                           for i in low])
         for lv in np.unique(ahead):
             sel = low[ahead == lv]
             v_in = None if vec is None else [vec[i] for i in sel]
             an, _, ok, _, _ = _batched_step(char, keeps, lv - 1, ea[sel], et[sel], etau[sel], owner[sel], Gc[sel], v_in, step=_step_estimate)
-            err[sel] = np.maximum(err[sel], np.where(ok, np.abs(an - ea[sel]) / an, np.inf))
+            moved = np.where(ok, np.abs(an - ea[sel]) / an, np.inf)
+            far = np.flatnonzero((moved > TIE_TOL) & (2.0 * moved > err[sel])) if lv > level + 1 else []
+            if len(far):  # a step over several levels that can raise the estimate: one Newton step is no bound there (0.42 % where the root is 0.83 % away), Newton to the root
+                v_far = None if v_in is None else [v_in[k] for k in far]
+                af, _, okf, _, _ = _batched_step(char, keeps, lv - 1, ea[sel[far]], et[sel[far]], etau[sel[far]], owner[sel[far]], Gc[sel[far]], v_far)
+                moved[far] = np.where(okf, np.maximum(moved[far], np.abs(af - ea[sel[far]]) / af), np.inf)
+            err[sel] = np.maximum(err[sel], moved)
         for j in done:
             conv_job[j] = False
             active[ej == j] = True
@@ -2104,7 +2135,7 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
             active[mine] = False
 
     near_ties()
-    if base * 2.0 ** (level + 2) <= MAX_SUBSTEPS_PER_RAD and len(ej):
+    if level + 2 <= _top_level(base) and len(ej):
         refine()
     # verified at the first refined level (where 9 in 10 sweep answers end; a lower branch at
     # the answer's own cut model that the coarse one puts above it is missed by a count there:
@@ -2168,12 +2199,12 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
             active = np.concatenate([active, np.ones(n_add, bool)])
             vec = None if vec is None else list(vec) + [None] * n_add
         near_ties()
-    while base * 2.0 ** (level + 1) <= MAX_SUBSTEPS_PER_RAD and active.any():
+    while level + 1 <= _top_level(base) and active.any():
         refine()
     # points at the finest level with no estimate (a repair there, a job solved again there): no
     # level above is left, so one level down (Newton from the point; the difference bounds the
     # finer value's error as it does upward)
-    top = _level(MAX_SUBSTEPS_PER_RAD, base)
+    top = _top_level(base)
     at_top = np.array([level_job[j] == top and not lost[j] for j in ej], bool)
     down = np.flatnonzero(at_top & ~np.isfinite(err)) if len(ej) else np.zeros(0, int)
     if len(down):
