@@ -370,6 +370,12 @@ def test_the_error_estimate_bounds_the_error(rows, absorber, cut, rpm):
 #: 3.9, 1.9 and 0.97 of its periods at the first five levels, each near a whole number: they all
 #: converge to 0.6888 mm (0.0004 % apart at the last two), the sixth (0.49) says 0.6832. The answer
 #: was 0.6890 mm, 0.83 % too deep, with an estimate of 0.07 %.
+#: H04, the same generator: 1 tooth at 238.8 rpm, a/D 0.023, down milling, spindle modes only, an
+#: 8.65 kHz one as stiff as the cut. The engine raised (an overflowing monodromy in the
+#: period-doubling scan) and, from its coarsest level, 19.8 a radian, could not reach the 346 the
+#: mode needs. The helper's ARPACK eigenvalues were spurious on its 78,000-step period map (|mu| 3
+#: at 6.4 mm); power iteration on the same map (2000 periods) gives |mu| 0.9956 at 6.68 mm and
+#: 1.0106 at 6.73: the boundary is in that bracket.
 INDEPENDENT_CASES = {
     "L00": ("""pose_id,x_mm,y_mm,z_mm,beta_deg,direction,mode,fn_hz,zeta,k_n_per_m,k_xy_n_per_m,k_yx_n_per_m
 P,1000,0,800,0,x,1,66.00949540471824,0.01650925712693344,381983.9276439074,1866331.058815217,
@@ -390,6 +396,14 @@ P,1000,0,800,0,y,3,108.19991722602357,0.05408057874148377,2325101.3422261616,,
 P,1000,0,800,0,y,4,6279.403325651447,0.010805990671448024,23893248.156539373,,
 """, Cut(teeth=6, kt_pa=950.5806123221722e6, kn_pa=341.0418714418909e6, radial_immersion=0.03299530073984504, milling="up"),
             251.69838436557984, 0.6833250e-3, 0.0004),
+    "H04": ("""pose_id,x_mm,y_mm,z_mm,beta_deg,direction,mode,fn_hz,zeta,k_n_per_m,k_xy_n_per_m,k_yx_n_per_m
+P,1000,0,800,0,x,1,3546.614130312604,0.017073382904425692,20876786.460493714,27402698.891556688,
+P,1000,0,800,0,y,1,3546.614130312604,0.017073382904425692,26607005.94988404,,20270586.62239892
+P,1000,0,800,0,x,2,8676.075485338075,0.07675899181614389,5581250.959584967,-11416840.017927725,
+P,1000,0,800,0,y,2,8676.075485338075,0.07675899181614389,31810077.33403151,,-15550714.94093343
+P,1000,0,800,0,y,3,3172.786557379353,0.03162508672863782,17585096.627498746,,
+""", Cut(teeth=1, kt_pa=661.8450538994671e6, kn_pa=254.406386085045e6, radial_immersion=0.022810645643019524, milling="down"),
+            238.76095354834112, 6.705e-3, 0.0038),
 }
 
 
