@@ -30,6 +30,13 @@ STD_COLUMNS = tuple("std_" + name for name in MODAL_PARAMS)
 #: where a mode is not coupled. A mode number with cross terms on both its x and y rows is one
 #: physical mode seen in both directions (see ToolTipDynamics.from_table).
 CROSS_COLUMNS = ("k_xy_n_per_m", "k_yx_n_per_m")
+
+
+def coupled_y_stiffness(k_xx, k_xy, k_yx):
+    """The y row's direct modal stiffness of a coupled (rank-one) mode, k_yy = k_xy k_yx / k_xx:
+    with H_ab = phi_La phi_Rb / (w^2 - ...) and k_ab = w^2 / (phi_La phi_Rb), phi_Ly phi_Ry =
+    (phi_Ly phi_Rx)(phi_Lx phi_Ry) / (phi_Lx phi_Rx)."""
+    return k_xy * k_yx / k_xx
 Orientation = Literal["abc", "beta"]
 
 

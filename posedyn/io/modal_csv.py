@@ -36,6 +36,7 @@ from posedyn.table import (
     STD_COLUMNS,
     ModalTable,
     PoseSet,
+    coupled_y_stiffness,
 )
 
 DYNAMIC_COLUMNS = ("zeta", "k_n_per_m", "c_ns_per_m", "m_kg")
@@ -108,7 +109,7 @@ def _check_cross_pairs(cross_rows: dict) -> None:
                 raise InputError(f"fn_hz within {COUPLED_FN_TOL:.0%} of {fn_x!r} {one}", got=repr(fn_y), column="fn_hz", **at)
             if max(zeta_x / zeta_y, zeta_y / zeta_x) > COUPLED_ZETA_RATIO:
                 raise InputError(f"zeta within a factor {COUPLED_ZETA_RATIO:g} of {zeta_x!r} {one}", got=repr(zeta_y), column="zeta", **at)
-            rank_one = k_xy * k_yx / k_x
+            rank_one = coupled_y_stiffness(k_x, k_xy, k_yx)
             if not rank_one > 0:
                 raise InputError(f"k_yx_n_per_m of the sign of k_xy_n_per_m, {k_xy!r} {one}: the y direct stiffness k_xy k_yx / k_xx is > 0",
                                  got=repr(k_yx), column="k_yx_n_per_m", **at)

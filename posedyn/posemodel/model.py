@@ -37,7 +37,7 @@ from posedyn.io import format_modal_table
 from posedyn.posemodel._gp import Predictor, fit_gps
 from posedyn.robot import direction_rows, tool_pose
 from posedyn.robot.twin import modes_at, pose_inertia
-from posedyn.table import DIRECTIONS, JOINT_COLUMNS, MODAL_PARAMS, ModalTable, PoseSet
+from posedyn.table import DIRECTIONS, JOINT_COLUMNS, MODAL_PARAMS, ModalTable, PoseSet, coupled_y_stiffness
 from posedyn.uncertainty import ModalDistribution
 
 METHODS = ("stgp", "mtgp", "physics")
@@ -370,7 +370,7 @@ def _one_mode_per_coupled_pair(rows: dict, cross: dict) -> None:
             continue
         for param in ("fn_hz", "zeta"):
             rows[param][i] = rows[param][j] = 0.5 * (rows[param][i] + rows[param][j])
-        rank_one = cross["k_xy_n_per_m"][i] * cross["k_yx_n_per_m"][j] / rows["k_n_per_m"][i]
+        rank_one = coupled_y_stiffness(rows["k_n_per_m"][i], cross["k_xy_n_per_m"][i], cross["k_yx_n_per_m"][j])
         if rank_one > 0:
             rows["k_n_per_m"][j] = rank_one
 
