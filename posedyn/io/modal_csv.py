@@ -93,7 +93,7 @@ def _check_cross_pairs(cross_rows: dict) -> None:
     pose and mode (one alone would be dropped: the mode is then read as uncoupled), and the two
     rows of a coupled mode consistent with one rank-one mode (COUPLED_FN_TOL, COUPLED_ZETA_RATIO,
     COUPLED_K_RATIO)."""
-    for (pose_id, direction, mode), (at, filled, _) in cross_rows.items():
+    for (pose_id, direction, mode), (at, filled, values) in cross_rows.items():
         for column in sorted(filled):
             own, other, partner = _CROSS_ROWS[column]
             if direction != own:
@@ -103,7 +103,7 @@ def _check_cross_pairs(cross_rows: dict) -> None:
                                  got="none", column=column, **at)
         if direction == "y" and filled:
             x_at, _, (fn_x, zeta_x, k_x, k_xy) = cross_rows[(pose_id, "x", mode)]
-            fn_y, zeta_y, k_y, k_yx = cross_rows[(pose_id, direction, mode)][2]
+            fn_y, zeta_y, k_y, k_yx = values
             one = f"(row {x_at['row']}, the x row of the same coupled mode: one rank-one mode)"
             if abs(fn_y - fn_x) > COUPLED_FN_TOL * 0.5 * (fn_x + fn_y):
                 raise InputError(f"fn_hz within {COUPLED_FN_TOL:.0%} of {fn_x!r} {one}", got=repr(fn_y), column="fn_hz", **at)

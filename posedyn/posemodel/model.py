@@ -360,7 +360,9 @@ def _one_mode_per_coupled_pair(rows: dict, cross: dict) -> None:
     """In place: the two rows of a predicted coupled mode (k_xy on the x row, k_yx on the y row)
     made one rank-one mode, as `ToolTipDynamics.from_table` reads it and the table parser checks:
     fn and zeta their means, the y row's stiffness k_xy k_yx / k_xx (predicted independently, it
-    drifted 2.5x from that away from the training poses)."""
+    drifted 2.5x from that away from the training poses). Cross terms predicted with opposite
+    signs have no such mode (k_yy would be negative): those rows stay as predicted, and the table
+    parser refuses them, naming the row."""
     if not {"k_xy_n_per_m", "k_yx_n_per_m"} <= set(cross):
         return
     at = {(p, d, m): i for i, (p, d, m) in enumerate(zip(rows["pose_index"], rows["direction"], rows["mode"]))}
