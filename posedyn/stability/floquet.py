@@ -76,7 +76,10 @@ two harmonics: the branches an interrupted cut puts between modes at or below a 
 tooth-passing frequencies, which the zeroth order cannot seed), else from the thetas where an
 eigenvalue of M comes nearest 1 / nu at that depth (`_descend`; before the flip seeds,
 period-doubling branches were the usual misses), else bisection in depth on the count, then
-Newton from the nearest multipliers; the result says `repaired=True`.
+Newton from the nearest multipliers; the result says `repaired=True`. The lowest point reached
+is the one verified; the others the same Newton reached are kept and ranked with the job's points
+(two branches 0.6 % apart at the coarse level swap at finer ones: keeping one left a 22-mode
+answer 1.9 % too deep).
 
 Flip islands. The count at one depth says nothing about depths below it where the unstable set
 is not an interval from some depth upwards: a real multiplier can pass -1 and come back (a
@@ -2160,10 +2163,15 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
                 retry[j] = True
                 continue
             found, lower = [], None  # boundary points to add to the job; the one below the count's depth
+
+            def unknown(x, t):  # not a point the job has
+                return not np.any((np.abs(ea[mine] - x) <= 1e-4 * x) & (np.abs(et[mine] - t) <= 1e-3))
+
             if count > 0 or not resolved or rung is not None:  # a lower branch (below a Hopf rung's depth where one counts)
                 extra = _repair(cv, tau, top if rung is None else rung / VERIFY_FRACTION)
-                if extra is not None:
-                    found, lower = [extra], extra
+                if extra:  # the others the repair reached are ranked with it (near ties: refined too)
+                    lower = extra[0]
+                    found = [lower] + [p for p in extra[1:] if unknown(*p)]
             elif count_above is not None and count_above > _crossings(et[mine][ea[mine] <= above]):
                 # more crossings up to rel_tol above the answer than its known points bring: a
                 # branch the search missed there (continuation follows the neighbours' branches
@@ -2172,8 +2180,7 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
                 # with the others (one below the count's depth, an island the count could not
                 # see, is verified there, as a repair)
                 a_r, t_r = _newton_from_nearest(cv, tau, above, DESCENT_POINTS, DESCENT_STARTS)
-                found = [(float(x), float(t)) for x, t in zip(a_r, t_r) if x <= above * (1.0 + REPAIR_SLACK)
-                         and not np.any((np.abs(ea[mine] - x) <= 1e-4 * x) & (np.abs(et[mine] - t) <= 1e-3))]
+                found = [(float(x), float(t)) for x, t in zip(a_r, t_r) if x <= above * (1.0 + REPAIR_SLACK) and unknown(x, t)]
                 lower = found[0] if found and found[0][0] < VERIFY_FRACTION * top else None
             if found:
                 add_j += [j] * len(found)
@@ -2326,15 +2333,25 @@ def _step_estimate(char, level, a_prev, t_prev, tau, Gc, vec):
     return np.where(ok, a_prev + step[:, 0], a_prev), np.where(ok, t_prev + step[:, 1], t_prev), ok, Gc, vec
 
 
-def _repair(char, tau, a_top):
-    """A boundary point below a_top missed by the seeds: first Newton from the boundary points of
+def _repair(char, tau, a_top) -> list:
+    """Boundary points below a_top missed by the seeds: first Newton from the boundary points of
     Hill's method (`_from_hill`), then `_descend` (Newton from the multipliers nearest the
     boundary condition at VERIFY_FRACTION x a_top), else bisection in depth on the winding
-    count, then Newton from the multipliers nearest it there."""
+    count, then Newton from the multipliers nearest it there. Returns [(depth, theta), ...]: the
+    accepted point first, then the other boundary points the same Newton reached, by depth (a
+    finer cut model can put one of them below the first: they are ranked with the job's points;
+    seen: two branches 0.6 % apart at the coarse level, the one kept 1.9 % too deep at the
+    converged one, 22 modes at 443 rpm); [] where none is accepted."""
     found = _from_hill(char, tau, a_top)
-    if found is None and np.isfinite(a_top):
+    if not found and np.isfinite(a_top):
         found = _descend(char, tau, a_top)
-    return found if found is not None else _bisect_repair(char, tau, a_top)
+    return found if found else _bisect_repair(char, tau, a_top)
+
+
+def _accepted_first(a, theta, k: int) -> list:
+    """[(a[k], theta[k]), then the other points by depth], thetas folded to [0, pi]."""
+    order = [k] + [i for i in np.argsort(a) if i != k]
+    return [(float(a[i]), _fold(theta[i])) for i in order]
 
 
 #: Repair from Hill's method: Newton from this many of its lowest boundary points below the
@@ -2348,21 +2365,21 @@ def _from_hill(char, tau, a_top):
     at or below a few tooth-passing frequencies (`hill`); Hill's method with HARMONICS harmonics
     places them within a few per cent. Newton (whole structure) from its lowest HILL_STARTS
     points; the lowest one reached below VERIFY_FRACTION x a_top is accepted when the winding
-    count at VERIFY_FRACTION x its depth is 0. None otherwise (or where the structure has no
-    mode within reach of the harmonics)."""
+    count at VERIFY_FRACTION x its depth is 0 (`_repair`'s list). [] otherwise (or where the
+    structure has no mode within reach of the harmonics)."""
     a_s, th_s = hill.hill_seeds(char.frf, char.free_eig()[0], char.cut, tau)
     take = np.flatnonzero(a_s <= HILL_ABOVE * a_top)[:HILL_STARTS]
     if not len(take):
-        return None
+        return []
     a_r, t_r, ok, _, _ = _newton(char, a_s[take], th_s[take], np.full(len(take), tau))
-    ok &= (a_r > 0) & (a_r < VERIFY_FRACTION * a_top)
-    if not ok.any():
-        return None
-    k = np.flatnonzero(ok)[np.argmin(a_r[ok])]
-    theta = float(np.mod(t_r[k], 2.0 * np.pi))
-    best = (float(a_r[k]), min(theta, 2.0 * np.pi - theta))
-    count, resolved, _ = unstable_count(char, VERIFY_FRACTION * best[0], tau, extra=[best[1]])
-    return best if count == 0 and resolved else None
+    ok &= a_r > 0
+    a_r, t_r = a_r[ok], t_r[ok]
+    below = np.flatnonzero(a_r < VERIFY_FRACTION * a_top)
+    if not len(below):
+        return []
+    found = _accepted_first(a_r, t_r, int(below[np.argmin(a_r[below])]))
+    count, resolved, _ = unstable_count(char, VERIFY_FRACTION * found[0][0], tau, extra=[found[0][1]])
+    return found if count == 0 and resolved else []
 
 
 #: Repair by descent: theta samples of the multipliers, Newton starts, rounds.
@@ -2413,20 +2430,18 @@ def _descend(char, tau, a_top):
     the branch they belong to crossed the circle below: `_newton_from_nearest` at that depth
     (DESCENT_STARTS starts among DESCENT_POINTS thetas) reaches such crossings directly. The lowest
     crossing below a is accepted when the count at 0.995 x its depth is 0 (otherwise the next round
-    starts from it). About 3 winding counts of work where the bisection takes 10. None when no
-    round ends with a zero count."""
+    starts from it). About 3 winding counts of work where the bisection takes 10. `_repair`'s
+    list; [] when no round ends with a zero count."""
     a = VERIFY_FRACTION * a_top
     for _ in range(DESCENT_ROUNDS):
         a_r, t_r = _newton_from_nearest(char, tau, a, DESCENT_POINTS, DESCENT_STARTS)
-        below = a_r < a
-        if not below.any():
-            return None
-        best = (float(a_r[below][0]), float(t_r[below][0]))
-        count, resolved, _ = unstable_count(char, VERIFY_FRACTION * best[0], tau, extra=[best[1]])
+        if not len(a_r) or a_r[0] >= a:  # sorted by depth
+            return []
+        count, resolved, _ = unstable_count(char, VERIFY_FRACTION * a_r[0], tau, extra=[t_r[0]])
         if count == 0 and resolved:
-            return best
-        a = VERIFY_FRACTION * best[0]
-    return None
+            return _accepted_first(a_r, t_r, 0)
+        a = VERIFY_FRACTION * a_r[0]
+    return []
 
 
 def _bisect_repair(char, tau, a_top):
@@ -2447,7 +2462,7 @@ def _bisect_repair(char, tau, a_top):
                 break
             lo, a = a, a * 2.0
         if hi is None:
-            return None
+            return []
     floor = max(lo, hi * 1e-3)
     hi *= VERIFY_FRACTION
     lo = None
@@ -2482,10 +2497,10 @@ def _bisect_repair(char, tau, a_top):
     if not fit.any() and trusted:  # a flip point: a real multiplier passes -1 in the bracket
         flip = _flip_root(char, tau, lo, hi)
         if flip is not None:
-            return flip, np.pi
+            return [(flip, np.pi)]
     if not fit.any():
-        return None
-    return float(a_r[fit][0]), float(t_r[fit][0])
+        return []
+    return _accepted_first(a_r, t_r, int(np.flatnonzero(fit)[0]))
 
 
 def _flip_root(char, tau: float, lo: float, hi: float, rel_tol: float = 1e-10):
