@@ -91,9 +91,13 @@ and so gives M(2 a) at every depth below the count's without an exponential (`la
 depths 2 % apart: the sign of det(I + M(2 a))), else on the flip seeds' own scan of that model
 (`_islands_from_seed_scan`) or a scan (`flip_islands`); then, where a multiplier is below -1 or
 within FLIP_NEAR of it, at the answer's own resolution (islands appear with a finer cut model;
-after the ladder, densely where it came near -1 or found an island, `dense_flip`). Where one is found
-the job is solved again at that resolution, from the seeds and the island's lower end, and an
-answer that cannot be brought below the island is marked not verified. Hopf islands (complex
+after the ladder, densely where it came near -1 or found an island, `dense_flip`), and where a
+multiplier's closest approach to -1 is shorter than it moved from the level before, at the finer
+levels too, one at a time, until the approach is resolved (`flip_ahead`: a multiplier peaking at
+-1.0002 made an island 3 % wide, 36 % under a 7.14 mm answer, that only 52 sub-steps a radian
+and up have; the answer had converged at 26). Where one is found the job is solved again at
+that resolution, from the seeds and the island's lower end, and an answer that cannot be brought
+below the island is marked not verified. Hopf islands (complex
 multipliers): the verification's count is also read at HOPF_RUNGS x the depth on the same
 interpolant (`hopf_rung`: an island that holds one of them is found and repaired below it), and
 a seed that leads to an island's lowest point finds it too (a band seed
@@ -951,6 +955,80 @@ def _sign_change(a: np.ndarray, M: np.ndarray):
         return False, np.nan
     k = int(np.searchsorted(ok, changed[0]))
     return True, float(np.sqrt(a[ok[k - 1]] * a[changed[0]]))
+
+
+def flip_ahead(char_at, level: int, top: int, spans, depth: float, tau: float, ladder=None):
+    """A period-doubling island that only a finer cut model than the answer's (`level`) has: where
+    a multiplier comes near -1 (`spans`, `ladder_islands`), the levels above, one at a time, around
+    each closest approach (within FLIP_NEAR; FOCUS_POINTS either side, LADDER_RATIO[1] apart, up to
+    VERIFY_FRACTION x depth, and FLIP_REFINE more around a local minimum, `_scan_island`), for as
+    long as at some of those depths the multiplier nearest -1 moved from the level before by more
+    than it is still short of -1 (the approach is not resolved). Seen: 15 modes, 4 teeth at 9382
+    rpm, a/D 0.053: -0.9979 / -0.9998 / -1.0001 / -1.0002 at 13 / 26 / 52 / 103 sub-steps a radian,
+    an island at 4.55-4.70 mm under a 7.14 mm answer converged at 26. char_at(level) is the cut
+    model of a level (up to `top`); `ladder`: the verification count's interpolant (level, a0,
+    coefficients, bound), which gives the answer's level without an exponential where it is that
+    level. Returns (a depth in the island's lower bracket, its level) or None."""
+    grids = [np.geomspace(lo, hi, max(2, int(np.ceil(np.log(hi / lo) / np.log(LADDER_RATIO[1]))) + 1))
+             for lo, hi in ((lo, min(hi, VERIFY_FRACTION * depth)) for lo, hi in spans) if 0.0 < lo < hi]
+    if not grids:
+        return None
+    a = np.unique(np.concatenate(grids))
+    on_ladder = ladder is not None and a[-1] <= ladder[1]
+    if on_ladder:  # where the approaches are, from the count's level: M(2 a) = P(1 - 2 a / a0), real; 1 / |(I + M)^-1|_F <= |1 + sigma|
+        M = _polynomial_matrices(np.ascontiguousarray(ladder[2].real), 1.0 - 2.0 * a / ladder[1])
+        with np.errstate(all="ignore"):
+            gap = 1.0 / _inverse_norms(np.eye(M.shape[-1]) + M)
+    else:
+        prev = _flip_scan(char_at(level), a[None], np.array([tau]))[1][0]
+        gap = np.abs(prev)
+    gap = np.where(np.isfinite(gap), gap, np.inf)
+    closest = [k for k in range(len(a)) if gap[k] < FLIP_NEAR and gap[k] <= gap[max(k - 1, 0)] and gap[k] <= gap[min(k + 1, len(a) - 1)]]
+    if not closest:
+        return None
+    keep = np.unique(np.clip(np.add.outer(closest, np.arange(-FOCUS_POINTS, FOCUS_POINTS + 1)).ravel(), 0, len(a) - 1))
+    a = a[keep]
+    if not on_ladder:
+        prev = prev[keep]
+    elif ladder[0] == level:
+        with np.errstate(all="ignore"):
+            sigma = np.linalg.eigvals(M[keep])
+        prev = sigma[np.arange(len(a)), np.argmin(np.abs(sigma + 1.0), axis=1)].real + 1.0
+    else:  # the answer's level is finer than the count's
+        prev = _flip_scan(char_at(level), a[None], np.array([tau]))[1][0]
+    for lv in range(level + 1, top + 1):
+        inside, nearest = _scan_island(char_at(lv), a, tau)
+        if inside is not None:
+            return inside, lv
+        with np.errstate(invalid="ignore"):
+            if not np.any(np.abs(nearest) < np.abs(nearest - prev)):
+                return None
+        prev = nearest
+    return None
+
+
+#: `flip_ahead` looks at this many depths either side of each closest approach of a multiplier to -1.
+FOCUS_POINTS = 3
+
+
+def _scan_island(char, a: np.ndarray, tau: float):
+    """(a depth in the lower bracket of the first island on depths `a`, or None; Re sigma + 1 of the
+    multiplier nearest -1 at each depth): a real multiplier below -1 at a depth where the first has
+    none, at the depths or at FLIP_REFINE more between the neighbours of each local minimum of
+    Re sigma + 1 in (0, FLIP_NEAR)."""
+    below, nearest = (x[0] for x in _flip_scan(char, a[None], np.array([tau])))
+    more = np.flatnonzero(below > below[0])
+    if len(more):
+        return float(np.sqrt(a[more[0] - 1] * a[more[0]])), nearest
+    y = nearest
+    for k in range(1, len(a) - 1):
+        if 0.0 < y[k] < FLIP_NEAR and y[k] <= y[k - 1] and y[k] <= y[k + 1]:
+            fine = np.linspace(a[k - 1], a[k + 1], FLIP_REFINE + 2)[1:-1]
+            b_fine = _flip_scan(char, fine[None], np.array([tau]))[0][0]
+            more = np.flatnonzero(b_fine > below[0])
+            if len(more):
+                return float(fine[more[0]]), nearest
+    return None, nearest
 
 
 def dense_flip(char, lo: float, hi: float, tau: float):
@@ -1865,9 +1943,15 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
                         hit[q], inside[q] = dense_flip(fine, lo, hi, taus[q])
                         if hit[q]:
                             break
+        at = levels.copy()  # the level the island was found at
+        for q in np.flatnonzero(near & ~hit):  # a multiplier near -1 that a finer cut model can take past it
+            found = flip_ahead(functools.partial(char, s, full=True), int(levels[q]), _top_level(base),
+                               spans[q] if spans[q] is not None else [(FLIP_RANGE[0] * depths[q], depths[q])], depths[q], taus[q], ladders.get(group[q]))
+            if found is not None:
+                hit[q], inside[q], at[q] = True, found[0], found[1]
         for q, j in zip(np.flatnonzero(hit), group[hit]):
-            if _level(points[j].substeps_per_rad, base) < _top_level(base):
-                solve_lower(j, points[j].substeps_per_rad, (inside[q], np.pi) if np.isfinite(inside[q]) else None)
+            if at[q] < _top_level(base):
+                solve_lower(j, base * 2.0 ** at[q], (inside[q], np.pi) if np.isfinite(inside[q]) else None)
             else:  # an island no finer model can be asked about: the answer is known to be too high
                 points[j] = dataclasses.replace(points[j], verified=False)
     # Hill's boundary points that reached none on the coarse cut model, below an answer at a finer
