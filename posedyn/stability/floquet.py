@@ -777,11 +777,9 @@ def flip_islands(char, depth, tau, refine: bool = True):
     hit, near = _island_verdict(below, nearest)
     near_q, near_k = [], []
     for q in np.flatnonzero(~hit) if refine else ():
-        y = nearest[q]
-        for k in range(1, a.shape[1]):
-            if 0.0 < y[k] < FLIP_NEAR and y[k] <= y[k - 1] and (k == a.shape[1] - 1 or y[k] <= y[k + 1]):
-                near_q.append(q)
-                near_k.append(k)
+        for k in _approaches(nearest[q]):
+            near_q.append(q)
+            near_k.append(k)
     if near_q:
         lo = a[near_q, np.array(near_k) - 1]
         hi = a[near_q, np.minimum(np.array(near_k) + 1, a.shape[1] - 1)]
@@ -1020,15 +1018,20 @@ def _scan_island(char, a: np.ndarray, tau: float):
     more = np.flatnonzero(below > below[0])
     if len(more):
         return float(np.sqrt(a[more[0] - 1] * a[more[0]])), nearest
-    y = nearest
-    for k in range(1, len(a) - 1):
-        if 0.0 < y[k] < FLIP_NEAR and y[k] <= y[k - 1] and y[k] <= y[k + 1]:
-            fine = np.linspace(a[k - 1], a[k + 1], FLIP_REFINE + 2)[1:-1]
-            b_fine = _flip_scan(char, fine[None], np.array([tau]))[0][0]
-            more = np.flatnonzero(b_fine > below[0])
-            if len(more):
-                return float(fine[more[0]]), nearest
+    for k in _approaches(nearest):
+        fine = np.linspace(a[k - 1], a[min(k + 1, len(a) - 1)], FLIP_REFINE + 2)[1:-1]
+        b_fine = _flip_scan(char, fine[None], np.array([tau]))[0][0]
+        more = np.flatnonzero(b_fine > below[0])
+        if len(more):
+            return float(fine[more[0]]), nearest
     return None, nearest
+
+
+def _approaches(y: np.ndarray) -> list:
+    """Indices k >= 1 of the local minima of Re sigma + 1 along a scan that lie in (0, FLIP_NEAR):
+    where a multiplier comes nearest -1 without passing it (the last point counts as a minimum)."""
+    last = len(y) - 1
+    return [k for k in range(1, len(y)) if 0.0 < y[k] < FLIP_NEAR and y[k] <= y[k - 1] and (k == last or y[k] <= y[k + 1])]
 
 
 def dense_flip(char, lo: float, hi: float, tau: float):
