@@ -55,7 +55,7 @@ demo: $(STAMP)
 	kill -TERM $$pid; wait $$pid; cat build/demo/service.log; exit $$status
 
 # two workers (the CI machine has two cores), each test file on one worker (module fixtures once)
-PYTEST_ARGS ?= -n 2 --dist loadfile
+PYTEST_ARGS ?= -n 2 --dist loadfile --no-loadscope-reorder
 
 test: $(STAMP)
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 $(BIN)/python -m pytest -q --durations=15 $(PYTEST_ARGS)

@@ -5,40 +5,67 @@ exceptions, and save a screenshot."""
 from __future__ import annotations
 
 import base64
+import fcntl
 import json
 import os
 import re
 import shutil
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 NAMES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
+INSTALL_LOCK = Path(tempfile.gettempdir()) / "posedyn-chromium-install.lock"
+
+
+def _on_path() -> str | None:
+    return next((shutil.which(name) for name in NAMES if shutil.which(name)), None)
+
+
+def _why_not_installable() -> str:
+    """Empty when Debian's chromium package can be installed here, else why not."""
+    if os.environ.get("POSEDYN_NO_BROWSER_INSTALL"):
+        return "no Chromium on PATH and POSEDYN_NO_BROWSER_INSTALL is set"
+    if not shutil.which("apt-get"):
+        return "no Chromium on PATH and no apt-get to install Debian's chromium package"
+    if os.geteuid() != 0:
+        return "no Chromium on PATH and not root, so Debian's chromium package cannot be installed"
+    return ""
 
 
 def find_or_install_chromium() -> tuple[str | None, str]:
-    """(path, reason): the browser, or None and why it could not be had."""
-    for name in NAMES:
-        if shutil.which(name):
-            return shutil.which(name), ""
-    if os.environ.get("POSEDYN_NO_BROWSER_INSTALL"):
-        return None, "no Chromium on PATH and POSEDYN_NO_BROWSER_INSTALL is set"
-    if not shutil.which("apt-get"):
-        return None, "no Chromium on PATH and no apt-get to install Debian's chromium package"
-    if os.geteuid() != 0:
-        return None, "no Chromium on PATH and not root, so Debian's chromium package cannot be installed"
-    env = dict(os.environ, DEBIAN_FRONTEND="noninteractive")
-    try:
-        subprocess.run(["apt-get", "update", "-qq"], check=True, capture_output=True, timeout=600, env=env)
-        subprocess.run(["apt-get", "install", "-y", "-qq", "--no-install-recommends", "chromium"], check=True, capture_output=True, timeout=900, env=env)
-    except (subprocess.SubprocessError, OSError) as exc:
-        detail = getattr(exc, "stderr", b"") or b""
-        return None, f"installing Debian's chromium package failed: {exc} {detail.decode(errors='replace')[-300:]}"
-    for name in NAMES:
-        if shutil.which(name):
-            return shutil.which(name), ""
+    """(path, reason): the browser, or None and why it could not be had. One install at a time
+    (a file lock): a call during `prefetch_chromium`'s install waits for it."""
+    if _on_path():
+        return _on_path(), ""
+    reason = _why_not_installable()
+    if reason:
+        return None, reason
+    with open(INSTALL_LOCK, "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if _on_path():
+            return _on_path(), ""
+        env = dict(os.environ, DEBIAN_FRONTEND="noninteractive")
+        try:
+            subprocess.run(["apt-get", "update", "-qq"], check=True, capture_output=True, timeout=600, env=env)
+            subprocess.run(["apt-get", "install", "-y", "-qq", "--no-install-recommends", "chromium"], check=True, capture_output=True, timeout=900, env=env)
+        except (subprocess.SubprocessError, OSError) as exc:
+            detail = getattr(exc, "stderr", b"") or b""
+            return None, f"installing Debian's chromium package failed: {exc} {detail.decode(errors='replace')[-300:]}"
+    if _on_path():
+        return _on_path(), ""
     return None, "apt-get installed chromium but no browser binary is on PATH"
+
+
+def prefetch_chromium() -> subprocess.Popen | None:
+    """Start `find_or_install_chromium` in a background process when it would install: `make
+    test` calls it at the start, so the download (about 45 s) overlaps the CPU-bound tests instead
+    of holding a worker idle at the report test. None when there is nothing to install."""
+    if _on_path() or _why_not_installable():
+        return None
+    return subprocess.Popen([sys.executable, __file__], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 
 def inspect_page(browser: str, page: Path, screenshot: Path, timeout_s: float = 60.0) -> dict:
@@ -149,3 +176,7 @@ class _Session:
             elif method == "Log.entryAdded" and params.get("entry", {}).get("level") == "error":
                 self.errors.append(f"log: {params['entry'].get('text')} {params['entry'].get('url', '')}")
         return message
+
+
+if __name__ == "__main__":  # prefetch_chromium's background install
+    find_or_install_chromium()
