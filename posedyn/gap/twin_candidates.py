@@ -87,15 +87,13 @@ def twin_candidates(robot: Robot, params: TwinParameters) -> dict[str, Candidate
     `device` = 1, at the twin's flange offset, kg 0-200)."""
     cache: dict = {}
     inertia: dict = {}  # pose_inertia per (q, flange mass, tip mass): a stiffness fit changes neither
+    changed: dict = {}  # TwinParameters per (scale, flange mass, softening, tip mass)
     data = robot.model.createData()
 
     def table(q: tuple, scale: tuple, flange_kg: float, softening: float, tip_kg: float) -> dict:
         key = (q, scale, round(flange_kg, 12), round(softening, 14), round(tip_kg, 12))
         if key not in cache:
-            p = params.scaled(np.asarray(scale))
-            if flange_kg or softening or tip_kg:
-                p = replace(p, flange_mass_kg=p.flange_mass_kg + flange_kg, gravity_softening_per_knm=p.gravity_softening_per_knm + softening,
-                            tip_mass_kg=p.tip_mass_kg + tip_kg)
+            p = changed_params(key[1:])
             masses = (q, key[2], key[4])
             if masses not in inertia:
                 if len(inertia) > 20000:
@@ -106,6 +104,20 @@ def twin_candidates(robot: Robot, params: TwinParameters) -> dict[str, Candidate
                 cache.clear()
             cache[key] = {(d, j): row for d in ("x", "y", "z") for j, row in enumerate(direction_rows(modes, d, params.robot_modes_per_direction), 1)}
         return cache[key]
+
+    def changed_params(key: tuple) -> TwinParameters:
+        """The twin's parameters with (scale, flange kg, softening, tip kg) applied; the same for
+        every pose of a candidate's evaluation, so made once per evaluation, not per pose."""
+        if key not in changed:
+            scale, flange_kg, softening, tip_kg = key
+            p = params.scaled(np.asarray(scale))
+            if flange_kg or softening or tip_kg:
+                p = replace(p, flange_mass_kg=p.flange_mass_kg + flange_kg, gravity_softening_per_knm=p.gravity_softening_per_knm + softening,
+                            tip_mass_kg=p.tip_mass_kg + tip_kg)
+            if len(changed) > 20000:
+                changed.clear()
+            changed[key] = p
+        return changed[key]
 
     def ratio(m: Measurements, scale, flange_kg: float, softening: float, tip_kg: float) -> np.ndarray:
         """changed / nominal twin for every fn_hz and k_n_per_m row (1 elsewhere); the twins'

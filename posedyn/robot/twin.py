@@ -129,7 +129,7 @@ def _point_jacobian(robot: Robot, q, offset_m, data) -> np.ndarray:
 
 def normal_modes(M: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """K phi = w^2 M phi with phi^T M phi = I: squared angular frequencies (ascending) and shapes."""
-    return scipy.linalg.eigh(K, M)
+    return scipy.linalg.eigh(K, M, check_finite=False)  # the callers build K and M finite
 
 
 def joint_stiffness(params: TwinParameters, gravity_nm: np.ndarray) -> np.ndarray:
