@@ -74,11 +74,11 @@ class Tuning:
 
     def impedance(self, s: np.ndarray) -> np.ndarray:
         """Z(s) for a host with M = 1, w_n = 1 (non-dimensional s = i lambda)."""
-        num, den = self._impedance_parts(s)
+        num, den = self._impedance_parts(s, s * s)
         return num / den
 
-    def _impedance_parts(self, s: np.ndarray):
-        """Z(s) = num / den, polynomials in s (den = 1 for the TMD)."""
+    def _impedance_parts(self, s: np.ndarray, s2: np.ndarray):
+        """Z(s) = num / den, polynomials in s (den = 1 for the TMD); s2 = s * s."""
         m = self.mass_ratio
         ko = m * self.gamma**2
         c = 2.0 * self.zeta_a * m * self.gamma
@@ -86,7 +86,6 @@ class Tuning:
             return ko + c * s, np.ones_like(s)
         b = self.delta * m
         ki = b * (self.eta * self.gamma) ** 2
-        s2 = s * s
         if self.layout == "idva-c3":
             den = b * c * s2 + (b * s + c) * ki
             return ko * den + b * c * ki * s2, den
@@ -103,10 +102,11 @@ class Tuning:
         G~ = (m s^2 den + num) / ((s^2 + 2 zeta_m s + 1)(m s^2 den + num) + m s^2 num) (one complex
         division instead of four: the tuning's objective evaluates it tens of thousands of times)."""
         s = 1j * np.asarray(lam, dtype=float)
-        num, den = self._impedance_parts(s)
-        ms2 = self.mass_ratio * (s * s)
+        s2 = s * s
+        num, den = self._impedance_parts(s, s2)
+        ms2 = self.mass_ratio * s2
         inner = ms2 * den + num
-        return inner / ((s * s + 2.0 * zeta_m * s + 1.0) * inner + ms2 * num)
+        return inner / ((s2 + 2.0 * zeta_m * s + 1.0) * inner + ms2 * num)
 
 
 def min_real_part(tuning: Tuning, zeta_m: float, grid: np.ndarray | None = None) -> float:

@@ -38,15 +38,17 @@ def _why_not_installable() -> str:
 def find_or_install_chromium() -> tuple[str | None, str]:
     """(path, reason): the browser, or None and why it could not be had. One install at a time
     (a file lock): a call during `prefetch_chromium`'s install waits for it."""
-    if _on_path():
-        return _on_path(), ""
+    found = _on_path()
+    if found:
+        return found, ""
     reason = _why_not_installable()
     if reason:
         return None, reason
     with open(INSTALL_LOCK, "a") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
-        if _on_path():
-            return _on_path(), ""
+        found = _on_path()
+        if found:
+            return found, ""
         env = dict(os.environ, DEBIAN_FRONTEND="noninteractive")
         try:
             subprocess.run(["apt-get", "update", "-qq"], check=True, capture_output=True, timeout=600, env=env)
@@ -54,9 +56,8 @@ def find_or_install_chromium() -> tuple[str | None, str]:
         except (subprocess.SubprocessError, OSError) as exc:
             detail = getattr(exc, "stderr", b"") or b""
             return None, f"installing Debian's chromium package failed: {exc} {detail.decode(errors='replace')[-300:]}"
-    if _on_path():
-        return _on_path(), ""
-    return None, "apt-get installed chromium but no browser binary is on PATH"
+    found = _on_path()
+    return (found, "") if found else (None, "apt-get installed chromium but no browser binary is on PATH")
 
 
 def prefetch_chromium() -> subprocess.Popen | None:

@@ -61,8 +61,13 @@ def twin_changes(values: dict) -> tuple[np.ndarray, float, float, float]:
 def updated_twin(params: TwinParameters, values: dict) -> TwinParameters:
     """The twin with named twin candidates applied (the flange mass as mounted in the device rows,
     the sensor's mass as in the impact tests)."""
-    scale, flange_kg, softening, tip_kg = twin_changes(values)
-    return replace(params.scaled(scale), flange_mass_kg=params.flange_mass_kg + flange_kg,
+    return changed_twin(params, *twin_changes(values))
+
+
+def changed_twin(params: TwinParameters, scale, flange_kg: float, softening: float, tip_kg: float) -> TwinParameters:
+    """`params` with the joint stiffnesses scaled and the flange mass, gravity softening and
+    tool-tip mass added (`twin_changes`)."""
+    return replace(params.scaled(np.asarray(scale)), flange_mass_kg=params.flange_mass_kg + flange_kg,
                    gravity_softening_per_knm=params.gravity_softening_per_knm + softening, tip_mass_kg=params.tip_mass_kg + tip_kg)
 
 
@@ -109,14 +114,9 @@ def twin_candidates(robot: Robot, params: TwinParameters) -> dict[str, Candidate
         """The twin's parameters with (scale, flange kg, softening, tip kg) applied; the same for
         every pose of a candidate's evaluation, so made once per evaluation, not per pose."""
         if key not in changed:
-            scale, flange_kg, softening, tip_kg = key
-            p = params.scaled(np.asarray(scale))
-            if flange_kg or softening or tip_kg:
-                p = replace(p, flange_mass_kg=p.flange_mass_kg + flange_kg, gravity_softening_per_knm=p.gravity_softening_per_knm + softening,
-                            tip_mass_kg=p.tip_mass_kg + tip_kg)
             if len(changed) > 20000:
                 changed.clear()
-            changed[key] = p
+            changed[key] = changed_twin(params, *key)
         return changed[key]
 
     def ratio(m: Measurements, scale, flange_kg: float, softening: float, tip_kg: float) -> np.ndarray:
