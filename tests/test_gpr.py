@@ -308,6 +308,28 @@ def posedyn(*args):
     return run_cli(*args)
 
 
+def test_train_never_deletes_what_is_at_out_unless_it_is_a_model(datasets, tmp_path):
+    """`--out` names a directory that is replaced as a whole: a folder holding anything but a
+    model's files, or a file, is refused before training (it used to be deleted); a model
+    directory is replaced; "." works from inside one."""
+    data = datasets / "seeds/hou2023_positions.csv"
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    (folder / "notes.txt").write_text("precious")
+    result = posedyn("train", data, "--out", folder, "--cv", "0")
+    assert result.returncode == 2 and "notes.txt" in result.stderr and "Traceback" not in result.stderr
+    assert (folder / "notes.txt").read_text() == "precious" and sorted(p.name for p in folder.iterdir()) == ["notes.txt"]
+    (tmp_path / "file").write_text("hello")
+    result = posedyn("train", data, "--out", tmp_path / "file", "--cv", "0")
+    assert result.returncode == 2 and "an existing file" in result.stderr and (tmp_path / "file").read_text() == "hello"
+    model = tmp_path / "model"
+    model.mkdir()  # empty: taken
+    assert posedyn("train", data, "--out", model, "--cv", "0").returncode == 0
+    assert run_cli("train", data, "--out", ".", "--cv", "0", cwd=model).returncode == 0  # the model replaced from inside it
+    assert sorted(p.name for p in model.iterdir()) == ["arrays.npz", "model.json"] and load_model(model).n_poses_ == 7
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # nothing left behind
+
+
 def test_train_and_predict_cli_contract(datasets, tmp_path):
     result = posedyn("train", datasets / "seeds/hou2023_positions.csv", "--out", tmp_path / "m", "--cv", "3", "--json")
     assert result.returncode == 0, result.stderr

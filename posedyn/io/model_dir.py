@@ -23,11 +23,33 @@ from posedyn.robot.twin import TwinParameters
 from posedyn.table import Mode
 
 SCHEMA_VERSION = 1
+#: What a model directory holds (`cut.toml`: the default cut `posedyn train --cut` adds).
+MODEL_FILES = frozenset({"model.json", "arrays.npz", "robot.urdf", "cut.toml"})
+
+
+def check_model_target(folder: str | os.PathLike) -> Path:
+    """`folder` where `save_model` may write: a new path, an empty directory, or a model directory
+    (model.json and nothing but MODEL_FILES), which is replaced. Anything else is refused: it
+    would be deleted with the directory it replaces."""
+    folder = Path(folder)
+    if not folder.exists():
+        return folder
+    expected = "a new path, an empty directory or a model directory to replace (model.json, arrays.npz, robot.urdf, cut.toml only)"
+    if not folder.is_dir():
+        raise InputError(expected, got="an existing file", file=str(folder))
+    entries = {p.name for p in folder.iterdir()}
+    others = sorted(entries - MODEL_FILES)
+    if others:
+        raise InputError(expected, got="a directory that also holds " + ", ".join(others[:3]) + (", ..." if len(others) > 3 else ""), file=str(folder))
+    if entries and "model.json" not in entries:
+        raise InputError(expected, got="a directory without model.json", file=str(folder))
+    return folder
 
 
 def save_model(model: PoseModel, folder: str | os.PathLike) -> None:
-    """Write the model directory atomically (a temporary folder renamed into place)."""
-    folder = Path(folder)
+    """Write the model directory atomically (a temporary folder renamed into place); a folder
+    that is there already must be one `check_model_target` accepts."""
+    folder = check_model_target(folder).resolve()  # resolved: "." has no name to rename
     folder.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=folder.parent, prefix=f".{folder.name}."))
     try:

@@ -13,7 +13,7 @@ from posedyn.errors import InputError
 from posedyn.io import concat_tables, read_modal_table, read_pose_table, write_modal_table
 from posedyn.io.atomic import write_text_atomic
 from posedyn.io.cut import read_cut
-from posedyn.io.model_dir import load_model, save_model
+from posedyn.io.model_dir import check_model_target, load_model, save_model
 from posedyn.io.twin_file import load_twin
 from posedyn.posemodel import PoseModel, cross_validate
 from posedyn.posemodel import r2_score, table_targets
@@ -40,6 +40,7 @@ def train(
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
 ):
     """Train a pose -> modal-parameter model and cross-validate it."""
+    check_model_target(out)  # before training: refused after it would waste the wait
     if cut is not None:
         read_cut(cut)  # validate before training
     table = concat_tables([read_modal_table(f) for f in files])
