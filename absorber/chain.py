@@ -40,7 +40,7 @@ from absorber.robust import Z95
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.errors import InputError, check_choice
 from posedyn.robot import GridPose, Robot, TwinParameters, direction_rows, pose_modes, pose_rotation, tool_pose
-from posedyn.stability import Cut, StabilityResult, critical_points, zoa
+from posedyn.stability import Cut, StabilityResult, absolute_limit, critical_points, zoa
 from posedyn.stability.critical import REL_TOL
 from posedyn.table import ModalTable, PoseSet
 from posedyn.uncertainty import ModalDistribution, distributions_from_table
@@ -143,7 +143,7 @@ class PoseSchedule:
     critical_depth_with_absorber_m: float
     stability: StabilityResult  # the bare structure's, with the accuracy it reached
     stability_with_absorber: StabilityResult
-    absolute_limit_m: float  # NaN where the config skips the absolute limits
+    absolute_limit_m: float  # the zeroth-order estimate capped by the critical depth (`absolute_limit`); NaN where the config skips them
     absolute_limit_with_absorber_m: float
     controller: dict | None  # None: no robot mode below 500 Hz in the actuator's direction
     robust: RobustEntry | None = None  # None: not asked, or the pose's uncertainty is unknown
@@ -347,8 +347,8 @@ def schedule_poses(poses: list[PoseModes], config: ScheduleConfig) -> list[PoseS
             critical_depth_with_absorber_m=result_with.depth_m,
             stability=result,
             stability_with_absorber=result_with,
-            absolute_limit_m=zoa.absolute_limit_m(pose.dyn, config.cut) if config.absolute_limits else math.nan,
-            absolute_limit_with_absorber_m=zoa.absolute_limit_m(structure, config.cut) if config.absolute_limits else math.nan,
+            absolute_limit_m=absolute_limit(pose.dyn, config.cut, depth).depth_m if config.absolute_limits else math.nan,
+            absolute_limit_with_absorber_m=absolute_limit(structure, config.cut, result_with.depth_m).depth_m if config.absolute_limits else math.nan,
             controller=controller_entry(pose.pose_id, pose.rows, pose.rotation, config.control),
             robust=guaranteed,
         ))

@@ -58,10 +58,46 @@ def test_lobes_json_csv_and_plot(datasets, tmp_path, method):
     )
     assert result.returncode == 0, result.stderr
     out = json.loads(result.stdout)
-    assert set(out) == {"rpm", "critical_depth_mm", "absolute_limit_mm", "method"} | ({"converged"} if method == "floquet" else set()) and out["method"] == method
+    assert set(out) == {"rpm", "critical_depth_mm", "absolute_limit_mm", "absolute_limit_source", "method"} | ({"converged"} if method == "floquet" else set()) and out["method"] == method
     assert len(out["rpm"]) == len(out["critical_depth_mm"]) == 11
     i = out["rpm"].index(2000.0)
     assert out["critical_depth_mm"][i] == pytest.approx(0.875 if method == "zoa" else 0.891, abs=0.005)
     assert 0 < out["absolute_limit_mm"] <= min(out["critical_depth_mm"])
     assert csv_path.read_text().splitlines()[0] == "rpm,critical_depth_mm"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+ROBOT_AND_SPINDLE = """pose_id,x_mm,y_mm,z_mm,beta_deg,direction,mode,fn_hz,zeta,k_n_per_m
+B,1500,0,700,0,x,1,10,0.04,8e5
+B,1500,0,700,0,x,2,1450,0.06,3.3e7
+B,1500,0,700,0,x,3,5200,0.015,2.5e7
+B,1500,0,700,0,y,1,10.8,0.035,1.1e6
+B,1500,0,700,0,y,2,1480,0.05,6e7
+B,1500,0,700,0,y,3,5400,0.012,2.8e7
+"""
+
+
+def test_the_absolute_limit_is_never_above_a_converged_depth(tmp_path):
+    """A 10 Hz robot mode at 600 rpm with 2 teeth (a new user's case): the zeroth-order absolute
+    limit, 0.61 mm, was reported beside a converged 0.43 mm, which `posedyn chatter` confirms
+    chatters at 0.5 mm. The limit is the infimum over speeds: capped by what was computed, and
+    the output says which it is."""
+    modes = tmp_path / "b.csv"
+    modes.write_text(ROBOT_AND_SPINDLE)
+    cut = ["--teeth", "2", "--kt-mpa", "700", "--kn-mpa", "210", "--radial-immersion", "0.5"]
+    result = posedyn("lobes", "--modes", modes, "--rpm-min", 500, "--rpm-max", 700, "--rpm-steps", 3, *cut, "--workers", 1, "--json")
+    assert result.returncode == 0, result.stderr
+    out = json.loads(result.stdout)
+    lowest = min(out["critical_depth_mm"])
+    assert out["critical_depth_mm"][1] == lowest == pytest.approx(0.4263, rel=0.02)
+    assert out["absolute_limit_mm"] == lowest and out["absolute_limit_source"] == "computed"
+    chatter = json.loads(posedyn("chatter", "--modes", modes, "--rpm", 600, *cut, "--depth-mm", 0.5, "--json").stdout)
+    assert chatter["stable"] is False
+    poses, cut_file = tmp_path / "poses.csv", tmp_path / "cut.toml"
+    poses.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nB,1500,0,700,0\n")
+    cut_file.write_text('[meta]\nkind = "cut"\nsource = "test"\n\n[cut]\nrpm = 600\nteeth = 2\nkt_mpa = 700\nkn_mpa = 210\nradial_immersion = 0.5\nmilling = "down"\n')
+    schedule = posedyn("schedule", "--modes", modes, "--poses", poses, "--cut", cut_file, "--json")
+    assert schedule.returncode == 0, schedule.stderr
+    entry, = json.loads(schedule.stdout)
+    assert entry["absolute_limit_mm"] == entry["critical_depth_mm"] == pytest.approx(lowest, rel=1e-6)
+    assert entry["absolute_limit_with_absorber_mm"] <= entry["critical_depth_with_absorber_mm"]

@@ -5,13 +5,15 @@ Floquet characteristic equation (`floquet`), the one entry point for user-facing
 (`critical`), time-domain check (`timesim`) and the published reference cases (`reference`)."""
 
 from posedyn.stability.batch import BatchStability
-from posedyn.stability.critical import REL_TOL, StabilityResult, critical_lobes, critical_points
+from posedyn.stability.critical import REL_TOL, AbsoluteLimit, StabilityResult, absolute_limit, critical_lobes, critical_points
 from posedyn.stability.cutting import Cut, force_matrix, interval_force_matrices, mean_force_matrix
 from posedyn.stability.model import CriticalDepths, Discretization, StabilityModel, chatter_frequencies
 
 __all__ = [
     "REL_TOL",
+    "AbsoluteLimit",
     "StabilityResult",
+    "absolute_limit",
     "critical_lobes",
     "critical_points",
     "BatchStability",

@@ -17,7 +17,7 @@ from posedyn.dynamics import ToolTipDynamics
 from posedyn.errors import InputError
 from posedyn.io import read_modal_table
 from posedyn.io.atomic import write_text_atomic
-from posedyn.stability import Cut, Discretization, StabilityModel, StabilityResult, critical_lobes, critical_points, zoa
+from posedyn.stability import Cut, Discretization, StabilityModel, StabilityResult, absolute_limit, critical_lobes, critical_points, zoa
 from service.cli.common import Milling, console, finite_or_none, print_json
 
 
@@ -156,15 +156,17 @@ def lobes(
         results = critical_lobes(model.dyn, model.cut, rpm, workers=workers)
         depth = np.array([r.depth_m for r in results])
         converged = [r.converged for r in results]
-        absolute = zoa.absolute_limit_m(model.dyn, model.cut)
+        limit = absolute_limit(model.dyn, model.cut, depth)
+        absolute, source = limit.depth_m, limit.source
     elif method is Method.sdm:
         depth = model.critical_depths(rpm, frequencies=False).depth_m
-        absolute, _ = model.absolute_limit_m()
+        absolute, _ = model.absolute_limit_m()  # the semi-discretization's own lobe bottoms
+        absolute, source = min(absolute, float(np.nanmin(depth, initial=np.inf))), "sdm"
     else:
         depth = zoa.lobes(model.dyn, model.cut, rpm)
-        absolute = zoa.absolute_limit_m(model.dyn, model.cut)
+        absolute, source = zoa.absolute_limit_m(model.dyn, model.cut), "zoa"
     depth_mm = [finite_or_none(d * 1e3) for d in depth]
-    out = {"rpm": rpm.tolist(), "critical_depth_mm": depth_mm, "absolute_limit_mm": finite_or_none(absolute * 1e3), "method": method.value}
+    out = {"rpm": rpm.tolist(), "critical_depth_mm": depth_mm, "absolute_limit_mm": finite_or_none(absolute * 1e3), "absolute_limit_source": source, "method": method.value}
     if converged is not None:
         out["converged"] = converged
     if csv_out is not None:
@@ -175,7 +177,8 @@ def lobes(
         print_json(out)
         return
     console.print(f"pose {pose}: {method.value} lobes over {rpm_min:g}-{rpm_max:g} rpm")
-    console.print(f"  lowest critical depth {np.min(depth) * 1e3:.4g} mm at {rpm[np.argmin(depth)]:.0f} rpm; absolute limit {absolute * 1e3:.4g} mm")
+    said = {"zoa": "zeroth-order estimate", "sdm": "semi-discretization lobe bottoms", "computed": "the lowest depth computed: the zeroth-order estimate is above it"}[source]
+    console.print(f"  lowest critical depth {np.min(depth) * 1e3:.4g} mm at {rpm[np.argmin(depth)]:.0f} rpm; absolute limit {absolute * 1e3:.4g} mm ({said})")
     best = int(np.argmax(np.where(np.isfinite(depth), depth, -np.inf)))
     console.print(f"  highest critical depth {depth[best] * 1e3:.4g} mm at {rpm[best]:.0f} rpm")
     for path in (csv_out, plot):
