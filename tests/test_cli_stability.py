@@ -101,3 +101,18 @@ def test_the_absolute_limit_is_never_above_a_converged_depth(tmp_path):
     entry, = json.loads(schedule.stdout)
     assert entry["absolute_limit_mm"] == entry["critical_depth_mm"] == pytest.approx(lowest, rel=1e-6)
     assert entry["absolute_limit_with_absorber_mm"] <= entry["critical_depth_with_absorber_mm"]
+
+
+def test_a_bad_output_path_is_a_clear_error_before_any_work(datasets, tmp_path):
+    """An output in a folder that does not exist, or that is a directory, used to end in a
+    FileNotFoundError / IsADirectoryError traceback after the whole computation."""
+    modes = datasets / "seeds/hou2023_positions.csv"
+    lobes = ["lobes", "--modes", modes, "--pose-id", "P5", "--rpm-min", 1500, "--rpm-max", 2500, "--rpm-steps", 3, *CUT]
+    for flag, path, said in (("--csv", tmp_path / "nodir" / "out.csv", "no folder"), ("--plot", tmp_path, "not a directory")):
+        result = posedyn(*lobes, flag, path)
+        assert result.returncode == 2 and said in result.stderr and flag in result.stderr and "Traceback" not in result.stderr
+    poses = tmp_path / "poses.csv"
+    poses.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nP,1450,0,800,0\n")
+    result = posedyn("schedule", "--modes", modes, "--poses", poses, "--cut", datasets / "seeds/hou2023_cut.toml", "--out", tmp_path)
+    assert result.returncode == 2 and "not a directory" in result.stderr and "--out" in result.stderr
+    assert not (tmp_path / "nodir").exists()

@@ -66,6 +66,9 @@ def main(argv: Optional[list[str]] = None) -> None:
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         sys.exit(2)
+    except OSError as exc:  # what the system refused past the early checks (permissions, a full disk, a path gone meanwhile)
+        print(f"error: {exc.filename if exc.filename is not None else 'a file'}: {exc.strerror or exc}", file=sys.stderr)
+        sys.exit(2)
     finally:
         if len(known_tunings()) > known:
             save_tuning_cache()

@@ -23,7 +23,7 @@ from posedyn.io.atomic import write_text_atomic
 from posedyn.io.cut import read_cut
 from posedyn.io import read_pose_table
 from posedyn.stability import Cut, mean_force_matrix
-from service.cli.common import Milling, console, finite_or_none, modal_input_for, print_json, resolve_cut, twin_modes_at
+from service.cli.common import Milling, console, finite_or_none, modal_input_for, output_file, print_json, resolve_cut, twin_modes_at
 
 app = typer.Typer(help="MRF absorber: optimal tuning, field for a target frequency.", no_args_is_help=True)
 
@@ -183,6 +183,7 @@ def schedule(
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Per-pose absorber schedule: chatter, target frequency, field, current, depths."""
+    output_file(out, "--out")
     the_cut, rpm, steps = read_cut(resolve_cut(cut, model_dir))
     config = ScheduleConfig(the_cut, rpm, read_absorber(absorber), control=read_actuator(actuator), policy=policy.value, steps=steps,
                             robust_samples=robust_samples if robust else 0, robust_seed=seed)

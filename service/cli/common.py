@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 from enum import Enum
 
@@ -23,6 +24,21 @@ from posedyn.table import PoseSet
 from posedyn.uncertainty import distributions_from_table
 
 console = Console(width=None if sys.stdout.isatty() else 140)
+
+
+def output_file(path: Path | None, option: str) -> Path | None:
+    """An output file checked before any work (a wrong path used to end in a traceback after the
+    whole computation): not a directory, in a folder that exists and can be written."""
+    if path is None:
+        return None
+    if path.is_dir():
+        raise InputError("a file to write, not a directory", got=str(path), file=str(path), column=option)
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise InputError("a file in an existing folder", got=f"no folder {folder}", file=str(path), column=option)
+    if not os.access(folder, os.W_OK):
+        raise InputError("a file in a folder this user can write", got=f"folder {folder} is read-only", file=str(path), column=option)
+    return path
 
 
 def finite_or_none(value: float):

@@ -15,7 +15,7 @@ from posedyn.identify import IdentifiedMode, lsfd
 from posedyn.io import write_modal_table
 from posedyn.io.frf import FRFSet, read_frf
 from posedyn.modal_fit import fit_table
-from service.cli.common import console, print_json
+from service.cli.common import console, output_file, print_json
 
 
 def fit(
@@ -29,6 +29,9 @@ def fit(
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Identify modes (fn, zeta, k with uncertainty; cross-coupling from an x-y FRF matrix) and write a modal table."""
+    output_file(out, "--out")
+    if plot is not None and plot.exists() and not plot.is_dir():
+        raise InputError("a folder for the plots", got="an existing file", file=str(plot), column="--plot")
     merged: dict[str, FRFSet] = {}
     for path in files:
         frf = read_frf(path)

@@ -22,7 +22,7 @@ from posedyn.io.model_dir import load_model, save_model
 from posedyn.io.params import read_params, write_params
 from posedyn.io.shipped import SEED004_ABSORBER, SHIPPED_TWIN
 from posedyn.io.twin_file import read_twin, write_twin
-from service.cli.common import console, resolve_cut
+from service.cli.common import console, output_file, resolve_cut
 from service.gap.baseline import Baseline, generate_measurements
 from service.gap.report import render
 
@@ -209,6 +209,7 @@ def gap_campaign(
         return
     if out is None:
         raise InputError("--out FILE.csv", column="--out")
+    output_file(out, "--out")
     hidden = {}
     for text in hide:
         name, _, rest = text.partition(":")

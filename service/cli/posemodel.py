@@ -17,7 +17,7 @@ from posedyn.io.model_dir import check_model_target, load_model, save_model
 from posedyn.io.twin_file import load_twin
 from posedyn.posemodel import PoseModel, cross_validate
 from posedyn.posemodel import r2_score, table_targets
-from service.cli.common import console, print_json
+from service.cli.common import console, output_file, print_json
 
 
 class Method(str, Enum):
@@ -94,6 +94,7 @@ def predict(
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
 ):
     """Predict tool-tip modes (with std) at poses."""
+    output_file(out, "--out")
     model = load_model(model_dir)
     pose_set = read_pose_table(poses)
     try:

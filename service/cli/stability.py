@@ -18,7 +18,7 @@ from posedyn.errors import InputError
 from posedyn.io import read_modal_table
 from posedyn.io.atomic import write_text_atomic
 from posedyn.stability import Cut, Discretization, StabilityModel, StabilityResult, absolute_limit, critical_lobes, critical_points, zoa
-from service.cli.common import Milling, console, finite_or_none, print_json
+from service.cli.common import Milling, console, finite_or_none, output_file, print_json
 
 
 class Method(str, Enum):
@@ -145,6 +145,8 @@ def lobes(
     as_json: bool = JSON,
 ):
     """Stability lobes: critical depth against spindle speed, and the absolute limit."""
+    output_file(csv_out, "--csv")
+    output_file(plot, "--plot")
     pose, model = _setup(modes, pose_id, teeth, kt_mpa, kn_mpa, radial_immersion, milling, feed_angle_deg, steps, order)
     if not (np.isfinite(rpm_min) and np.isfinite(rpm_max) and 0 < rpm_min < rpm_max):
         raise InputError("0 < --rpm-min < --rpm-max", got=(rpm_min, rpm_max), column="--rpm-min")

@@ -15,7 +15,7 @@ from posedyn.dynamics import ToolTipDynamics
 from posedyn.io import write_modal_table
 from posedyn.io.tool_file import read_tool
 from posedyn.tool_change import tool_changed_table
-from service.cli.common import console, modal_table_for, print_json
+from service.cli.common import console, modal_table_for, output_file, print_json
 
 
 def tool_change(
@@ -30,6 +30,7 @@ def tool_change(
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Predict another tool's tip modes from the reference tool's, pose by pose (RCSA with cross terms)."""
+    output_file(out, "--out")
     table = modal_table_for(model_dir, modes, poses)
     reference, target = read_tool(reference_tool), read_tool(target_tool)
     predicted = tool_changed_table(table, reference, target, pivot_mm * 1e-3, max_order)

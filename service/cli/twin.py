@@ -16,7 +16,7 @@ from posedyn.io.twin_file import load_twin
 from posedyn.robot import ToolPose
 from posedyn.robot.campaign import GridPose, Noise, generate_campaign, pose_modes
 from posedyn.robot.twin_effects import parse_effect
-from service.cli.common import console, print_json
+from service.cli.common import console, output_file, print_json
 
 app = typer.Typer(help="The robot twin: modes at a pose, synthetic modal-test campaigns.", no_args_is_help=True)
 EFFECT = typer.Option(None, "--effect", help="Hide a named effect, e.g. device_mass:mass_kg=8 (repeatable).")
@@ -36,6 +36,7 @@ def campaign(
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
 ):
     """Generate a modal-test campaign (the modal-table format) over a pose grid."""
+    output_file(out, "--out")
     g = read_grid(grid)
     robot, params = load_twin(twin or g.twin, payload_kg)
     effects = g.effects + tuple(parse_effect(e) for e in effect or ())
