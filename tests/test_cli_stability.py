@@ -58,7 +58,9 @@ def test_lobes_json_csv_and_plot(datasets, tmp_path, method):
     )
     assert result.returncode == 0, result.stderr
     out = json.loads(result.stdout)
-    assert set(out) == {"rpm", "critical_depth_mm", "absolute_limit_mm", "absolute_limit_source", "method"} | ({"converged"} if method == "floquet" else set()) and out["method"] == method
+    extra = {"floquet": {"converged"}, "sdm": {"steps"}, "zoa": set()}[method]
+    assert set(out) == {"rpm", "critical_depth_mm", "absolute_limit_mm", "absolute_limit_source", "method"} | extra and out["method"] == method
+    assert out.get("steps", 40) == 40  # the semi-discretization says which step count it used
     assert len(out["rpm"]) == len(out["critical_depth_mm"]) == 11
     i = out["rpm"].index(2000.0)
     assert out["critical_depth_mm"][i] == pytest.approx(0.875 if method == "zoa" else 0.891, abs=0.005)
@@ -101,6 +103,18 @@ def test_the_absolute_limit_is_never_above_a_converged_depth(tmp_path):
     entry, = json.loads(schedule.stdout)
     assert entry["absolute_limit_mm"] == entry["critical_depth_mm"] == pytest.approx(lowest, rel=1e-6)
     assert entry["absolute_limit_with_absorber_mm"] <= entry["critical_depth_with_absorber_mm"]
+
+
+def test_lobes_steps_is_the_expert_override_as_in_chatter(datasets):
+    """`--steps` was silently ignored by `lobes` (the converged engine ran), while `chatter
+    --steps` switches to the semi-discretization: the same flags, two answers."""
+    args = ["--modes", datasets / "seeds/hou2023_positions.csv", "--pose-id", "P5", *CUT]
+    out = json.loads(posedyn("lobes", *args, "--rpm-min", 1900, "--rpm-max", 2000, "--rpm-steps", 2, "--steps", 8, "--json").stdout)
+    chatter = json.loads(posedyn("chatter", *args, "--rpm", 2000, "--steps", 8, "--json").stdout)
+    assert out["method"] == chatter["method"] == "sdm" and out["steps"] == chatter["steps"] == 8
+    assert out["critical_depth_mm"][1] == pytest.approx(chatter["critical_depth_mm"], rel=0.01)
+    result = posedyn("lobes", *args, "--rpm-min", 1900, "--rpm-max", 2000, "--method", "zoa", "--steps", 8)
+    assert result.returncode == 2 and "--steps" in result.stderr
 
 
 def test_a_bad_output_path_is_a_clear_error_before_any_work(datasets, tmp_path):

@@ -147,6 +147,10 @@ def lobes(
     """Stability lobes: critical depth against spindle speed, and the absolute limit."""
     output_file(csv_out, "--csv")
     output_file(plot, "--plot")
+    if steps is not None and method is Method.zoa:
+        raise InputError("--steps with --method sdm (or floquet, which it replaces), not zoa", got=steps, column="--steps")
+    if steps is not None:  # the expert override, as in `posedyn chatter`
+        method = Method.sdm
     pose, model = _setup(modes, pose_id, teeth, kt_mpa, kn_mpa, radial_immersion, milling, feed_angle_deg, steps, order)
     if not (np.isfinite(rpm_min) and np.isfinite(rpm_max) and 0 < rpm_min < rpm_max):
         raise InputError("0 < --rpm-min < --rpm-max", got=(rpm_min, rpm_max), column="--rpm-min")
@@ -171,6 +175,8 @@ def lobes(
     out = {"rpm": rpm.tolist(), "critical_depth_mm": depth_mm, "absolute_limit_mm": finite_or_none(absolute * 1e3), "absolute_limit_source": source, "method": method.value}
     if converged is not None:
         out["converged"] = converged
+    if method is Method.sdm:
+        out["steps"] = model.disc.steps
     if csv_out is not None:
         _write_csv(csv_out, rpm, depth_mm)
     if plot is not None:
@@ -178,7 +184,8 @@ def lobes(
     if as_json:
         print_json(out)
         return
-    console.print(f"pose {pose}: {method.value} lobes over {rpm_min:g}-{rpm_max:g} rpm")
+    how = f"{method.value}, {model.disc.steps} steps per delay: error not estimated" if method is Method.sdm else method.value
+    console.print(f"pose {pose}: {how} lobes over {rpm_min:g}-{rpm_max:g} rpm")
     said = {"zoa": "zeroth-order estimate", "sdm": "semi-discretization lobe bottoms", "computed": "the lowest depth computed: the zeroth-order estimate is above it"}[source]
     console.print(f"  lowest critical depth {np.min(depth) * 1e3:.4g} mm at {rpm[np.argmin(depth)]:.0f} rpm; absolute limit {absolute * 1e3:.4g} mm ({said})")
     best = int(np.argmax(np.where(np.isfinite(depth), depth, -np.inf)))
