@@ -120,6 +120,8 @@ def chatter(
         table.add_row("accuracy", state)
     if depth_mm is not None:
         verdict = "stable" if out["stable"] else "CHATTER"
+        if steps is None and not result.converged:
+            verdict += " by a depth that did NOT converge: not assured"
         table.add_row(f"at {depth_mm:g} mm", verdict if steps is None else f"spectral radius {out['spectral_radius']:.6f} ({verdict})")
     console.print(table)
 
@@ -190,6 +192,10 @@ def lobes(
     console.print(f"  lowest critical depth {np.min(depth) * 1e3:.4g} mm at {rpm[np.argmin(depth)]:.0f} rpm; absolute limit {absolute * 1e3:.4g} mm ({said})")
     best = int(np.argmax(np.where(np.isfinite(depth), depth, -np.inf)))
     console.print(f"  highest critical depth {depth[best] * 1e3:.4g} mm at {rpm[best]:.0f} rpm")
+    if converged is not None and not all(converged):
+        missed = [f"{r:.0f}" for r, ok in zip(rpm, converged) if not ok]
+        console.print(f"  NOT converged at {len(missed)} of {len(rpm)} speeds ({', '.join(missed[:8])}{', ...' if len(missed) > 8 else ''} rpm): "
+                      "those depths are not assured (--json: 'converged')")
     for path in (csv_out, plot):
         if path is not None:
             console.print(f"  wrote {path}")
