@@ -1,6 +1,8 @@
 """`posedyn chatter` and `posedyn lobes`: the JSON contract and errors."""
 
+import dataclasses
 import json
+import math
 
 import pytest
 from tests.cli_helpers import run_cli
@@ -132,16 +134,21 @@ def test_a_bad_output_path_is_a_clear_error_before_any_work(datasets, tmp_path):
     assert not (tmp_path / "nodir").exists()
 
 
-def test_a_depth_that_did_not_converge_is_never_shown_as_a_plain_verdict(tmp_path):
-    """30,000 rpm, 8 teeth, 2 % immersion on a robot-plus-spindle table: the engine cannot
-    estimate its error there. `chatter` printed 'NOT converged' and then 'at 50 mm: stable'
-    plainly; `lobes` printed the depth with no hint. Both now say the verdict is not assured."""
-    modes = tmp_path / "rs.csv"
-    modes.write_text(ROBOT_AND_SPINDLE.replace("0.04,8e5", "0.04,8e5\nB,1500,0,700,0,x,4,22,0.05,3.0e6").replace("0.035,1.1e6", "0.035,1.1e6\nB,1500,0,700,0,y,4,25,0.05,4.0e6"))
-    cut = ["--teeth", "8", "--kt-mpa", "700", "--kn-mpa", "210", "--radial-immersion", "0.02"]
-    out = json.loads(posedyn("chatter", "--modes", modes, "--rpm", 30000, *cut, "--json").stdout)
-    assert out["converged"] is False  # the case this test is about (a fix of the engine there makes it moot)
-    text = posedyn("chatter", "--modes", modes, "--rpm", 30000, *cut, "--depth-mm", 50).stdout
-    assert "NOT converged" in text and "not assured" in text
-    text = posedyn("lobes", "--modes", modes, "--rpm-min", 29000, "--rpm-max", 30000, "--rpm-steps", 2, *cut, "--workers", 1).stdout
-    assert "NOT converged at 1 of 2 speeds (30000 rpm)" in text
+def test_a_depth_that_did_not_converge_is_never_shown_as_a_plain_verdict(datasets, monkeypatch):
+    """`chatter` printed 'NOT converged' and then 'at 50 mm: stable' plainly; `lobes` printed
+    the depths with no hint (only --json carried the flag). Both now say the verdict is not
+    assured. (The engine's own non-converged cases get fixed one by one - the case a new user
+    found at 30,000 rpm now converges - so the result is made non-converged here.)"""
+    import service.cli.stability as cli
+
+    def unconverged(points):
+        return [dataclasses.replace(p, converged=False, rel_error_estimate=math.inf) for p in points]
+
+    engine_points, engine_lobes = cli.critical_points, cli.critical_lobes
+    monkeypatch.setattr(cli, "critical_points", lambda *a, **k: unconverged(engine_points(*a, **k)))
+    monkeypatch.setattr(cli, "critical_lobes", lambda *a, **k: unconverged(engine_lobes(*a, **k)[:1]) + engine_lobes(*a, **k)[1:])
+    args = ["--modes", datasets / "seeds/hou2023_positions.csv", "--pose-id", "P5", *CUT]
+    text = posedyn("chatter", *args, "--rpm", 2000, "--depth-mm", 0.5).stdout
+    assert "NOT converged" in text and "stable by a depth that did NOT converge: not assured" in text
+    text = posedyn("lobes", *args, "--rpm-min", 1900, "--rpm-max", 2000, "--rpm-steps", 2, "--workers", 1).stdout
+    assert "NOT converged at 1 of 2 speeds (1900 rpm)" in text

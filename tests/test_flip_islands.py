@@ -152,3 +152,25 @@ def test_the_answer_under_a_narrow_island_is_its_bottom_by_an_independent_simula
     assert r.verified and r.converged
     assert r.theta_rad == pytest.approx(np.pi)
     assert sim.grows_either_side(NARROW_ROWS, NARROW_CUT, NARROW_RPM, r.depth_m) == (False, True)
+
+
+HIGH_SPEED_ROWS = [("x", 9.5, 0.04, 8.0e5), ("x", 22.0, 0.05, 3.0e6), ("x", 1450.0, 0.06, 3.3e7), ("x", 5200.0, 0.015, 2.5e7),
+                   ("y", 10.8, 0.035, 1.1e6), ("y", 25.0, 0.05, 4.0e6), ("y", 1480.0, 0.05, 6.0e7), ("y", 5400.0, 0.012, 2.8e7)]
+
+
+def test_an_island_found_at_the_finest_level_is_solved_there_not_left_unverified():
+    """A new user's case (30,000 rpm, 8 teeth, 2 % immersion, robot plus spindle modes): a
+    period-doubling island at 41-48 mm lies under the seeds' 57.0 mm answer on every cut model,
+    and the answer ends at the finest level, where the engine used to give up ('an island no
+    finer model can be asked about': 57.0 mm, not verified, printed NOT converged). It is solved
+    there from the island's lower end: 40.68 mm at 6000 Hz (half the tooth-passing frequency
+    plus one), verified; the independent simulation decays 5 % below and grows at 6000 Hz 5 % above."""
+    dyn = ToolTipDynamics.from_modes(x=[Mode(f, z, k) for d, f, z, k in HIGH_SPEED_ROWS if d == "x"],
+                                     y=[Mode(f, z, k) for d, f, z, k in HIGH_SPEED_ROWS if d == "y"])
+    cut = Cut(teeth=8, kt_pa=700e6, kn_pa=210e6, radial_immersion=0.02, milling="down")
+    point = floquet.critical_depth(dyn, cut, 30000.0)
+    assert point.verified is not False and point.converged and point.rel_error_estimate < 0.01
+    assert point.depth_m == pytest.approx(40.68e-3, rel=0.01) and point.chatter_hz == pytest.approx(6000.0, rel=1e-6)
+    args = (HIGH_SPEED_ROWS, 8, 700e6, 210e6, 0.02, "down", 30000.0)
+    below, above = (sim.analyse(*args, f * point.depth_m, t_sim=0.6) for f in (0.95, 1.05))
+    assert below["sigma"] < 0 < above["sigma"] and above["fdom"] == pytest.approx(6000.0, rel=1e-3)

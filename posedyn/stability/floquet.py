@@ -96,8 +96,9 @@ multiplier's closest approach to -1 is shorter than it moved from the level befo
 levels too, one at a time, until the approach is resolved (`flip_ahead`: a multiplier peaking at
 -1.0002 made an island 3 % wide, 36 % under a 7.14 mm answer, that only 52 sub-steps a radian
 and up have; the answer had converged at 26). Where one is found the job is solved again at
-that resolution, from the seeds and the island's lower end, and an answer that cannot be brought
-below the island is marked not verified. Hopf islands (complex
+that resolution (the finest level too: a 41-48 mm island under a 57 mm answer at 30,000 rpm
+had been left unverified there), from the seeds and the island's lower end, and an answer that
+cannot be brought below the island is marked not verified. Hopf islands (complex
 multipliers): the verification's count is also read at HOPF_RUNGS x the depth on the same
 interpolant (`hopf_rung`: an island that holds one of them is found and repaired below it), and
 a seed that leads to an island's lowest point finds it too (a band seed
@@ -762,19 +763,24 @@ FLIP_NEAR = 0.02
 FLIP_REFINE = 8
 
 
-def flip_islands(char, depth, tau, refine: bool = True):
+def flip_islands(char, depth, tau, refine: bool = True, starts: bool = False):
     """For each (depth, tau): whether a real multiplier of M(2 a) is below -1 at some scanned a in
     FLIP_RANGE[0] .. VERIFY_FRACTION x depth, i.e. a period-doubling lobe lies below the depth.
     Such a lobe is an island (the multiplier passes -1 and comes back), which the winding count at
     one depth above it cannot see; where the multiplier nearest -1 only comes near it (FLIP_NEAR),
     the scan is refined there (FLIP_REFINE points) so an island narrower than the scan's spacing
     is not passed over. Returns (island, near): near where some scanned Re sigma + 1 is below
-    FLIP_NEAR (a finer cut model may turn it into an island). `refine` False: the scan alone."""
+    FLIP_NEAR (a finer cut model may turn it into an island). `refine` False: the scan alone.
+    `starts`: also a depth at the island's lower end for each (the geometric middle of the first
+    scan bracket it begins in, as `dense_flip`'s; NaN where none), where a job solved again starts
+    (without one it starts from the seeds, whose coarser flip scan can miss the island: seen, a
+    41-48 mm island under a 57 mm answer at 30,000 rpm, 8 teeth, 2 % immersion, left unverified)."""
     depth = np.atleast_1d(np.asarray(depth, dtype=float))
     tau = np.broadcast_to(np.asarray(tau, dtype=float), depth.shape)
     a = _flip_grid(depth, VERIFY_FRACTION)
     below, nearest = _flip_scan(char, a, tau)
     hit, near = _island_verdict(below, nearest)
+    inside = np.array([_first_rise(a[q], below[q], below[q, 0]) for q in range(len(depth))])
     near_q, near_k = [], []
     for q in np.flatnonzero(~hit) if refine else ():
         for k in _approaches(nearest[q]):
@@ -785,9 +791,18 @@ def flip_islands(char, depth, tau, refine: bool = True):
         hi = a[near_q, np.minimum(np.array(near_k) + 1, a.shape[1] - 1)]
         fine = lo[:, None] + (hi - lo)[:, None] * np.linspace(0.0, 1.0, FLIP_REFINE + 2)[None, 1:-1]
         b_fine, _ = _flip_scan(char, fine, tau[near_q])
-        for q, k, row in zip(near_q, near_k, b_fine):
-            hit[q] |= bool(np.any(row > below[q, 0]))
-    return hit, near
+        for i, (q, row) in enumerate(zip(near_q, b_fine)):
+            if not hit[q] and np.any(row > below[q, 0]):
+                hit[q] = True
+                inside[q] = _first_rise(np.r_[lo[i], fine[i]], np.r_[below[q, 0], row], below[q, 0])
+    return (hit, near, inside) if starts else (hit, near)
+
+
+def _first_rise(a: np.ndarray, below: np.ndarray, base) -> float:
+    """The geometric middle of the first bracket of increasing depths a in which the number of
+    real multipliers below -1 rises above `base`; NaN where it never does."""
+    k = np.flatnonzero(below > base)
+    return float(np.sqrt(a[k[0] - 1] * a[k[0]])) if len(k) and k[0] > 0 else (float(a[0]) if len(k) else np.nan)
 
 
 def _island_verdict(below, nearest):
@@ -1937,7 +1952,7 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
             fine = char(s, int(level), True)
             whole = np.array([q for q in sub if spans[q] is None], int)
             if len(whole):
-                hit[whole] = flip_islands(fine, depths[whole], taus[whole])[0]
+                hit[whole], _, inside[whole] = flip_islands(fine, depths[whole], taus[whole], starts=True)
             for q in (q for q in sub if spans[q] is not None):  # densely where the coarse ladder came near -1
                 hit[q], inside[q] = False, np.nan
                 for lo, hi in spans[q]:
@@ -1955,6 +1970,11 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
         for q, j in zip(np.flatnonzero(hit), group[hit]):
             if at[q] < _top_level(base):
                 solve_lower(j, base * 2.0 ** at[q], (inside[q], np.pi) if np.isfinite(inside[q]) else None)
+            elif np.isfinite(inside[q]) and hints is None:
+                # an island at the finest level: solved there from its lower end all the same (the
+                # redo estimates its error one level down); a redo that meets the island again
+                # (hinted) does not recurse
+                solve_lower(j, base * 2.0 ** at[q], (inside[q], np.pi))
             else:  # an island no finer model can be asked about: the answer is known to be too high
                 points[j] = dataclasses.replace(points[j], verified=False)
     # Hill's boundary points that reached none on the coarse cut model, below an answer at a finer
