@@ -152,3 +152,23 @@ def test_a_depth_that_did_not_converge_is_never_shown_as_a_plain_verdict(dataset
     assert "NOT converged" in text and "stable by a depth that did NOT converge: not assured" in text
     text = posedyn("lobes", *args, "--rpm-min", 1900, "--rpm-max", 2000, "--rpm-steps", 2, "--workers", 1).stdout
     assert "NOT converged at 1 of 2 speeds (1900 rpm)" in text
+
+
+@pytest.mark.parametrize("change, column", [
+    (("teeth = 2", "teeth = 2.5"), "cut.teeth"),  # was truncated to 2
+    (("milling = ", "rpmm = 5\nmilling = "), "cut.rpmm"),  # a typo was ignored
+    (("kt_mpa = 700", "kt_n_per_m2 = 7e8"), "cut.kt_n_per_m2"),  # was reported as 'kt_mpa missing'
+    (("[cut]", "[stabilty]\nsteps = 40\n\n[cut]"), "stabilty"),  # a misspelt table was ignored
+])
+def test_a_cut_file_names_the_key_it_does_not_know(tmp_path, change, column):
+    from posedyn.errors import InputError
+    from posedyn.io.cut import read_cut
+
+    text = '[meta]\nkind = "cut"\nsource = "test"\n\n[cut]\nrpm = 600\nteeth = 2\nkt_mpa = 700\nkn_mpa = 210\nradial_immersion = 0.5\nmilling = "down"\n'
+    path = tmp_path / "cut.toml"
+    path.write_text(text)
+    assert read_cut(path)[0].teeth == 2
+    path.write_text(text.replace(*change))
+    with pytest.raises(InputError) as err:
+        read_cut(path)
+    assert err.value.column == column and err.value.file == str(path)

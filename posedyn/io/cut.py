@@ -13,18 +13,32 @@ import os
 from pathlib import Path
 
 from posedyn.errors import InputError
-from posedyn.io.params import read_params, reading
+from posedyn.io.params import check_keys, read_params, reading, whole_number
 from posedyn.sle import SleCut
 from posedyn.stability import Cut
 
 
+#: The tables and keys of a cut file (anything else is refused: a typo would take a default).
+CUT_KEYS = {
+    "cut": ("rpm", "teeth", "kt_mpa", "kn_mpa", "radial_immersion", "milling", "feed_angle_deg", "tool_diameter_mm"),
+    "stability": ("steps",),
+    "sle": ("helix_deg", "axial_depth_mm", "feed_per_tooth_mm", "offset_um"),
+}
+
+
+def _read(path: str | os.PathLike) -> dict:
+    p = read_params(path)
+    check_keys(p, CUT_KEYS, path, "cut file")
+    return p
+
+
 def read_cut(path: str | os.PathLike) -> tuple[Cut, float, int | None]:
     """(Cut, rpm, steps) from a cut file; steps None unless the file overrides the engine."""
-    p = read_params(path)
+    p = _read(path)
     with reading(path, "cut file"):
         c = p["cut"]
         cut = Cut(
-            teeth=int(c["teeth"]),
+            teeth=whole_number(c["teeth"], "cut.teeth"),
             kt_pa=float(c["kt_mpa"]) * 1e6,
             kn_pa=float(c["kn_mpa"]) * 1e6,
             radial_immersion=float(c["radial_immersion"]),
@@ -33,7 +47,7 @@ def read_cut(path: str | os.PathLike) -> tuple[Cut, float, int | None]:
         )
         rpm = float(c["rpm"])
         steps = p.get("stability", {}).get("steps")
-        steps = None if steps is None else int(steps)
+        steps = None if steps is None else whole_number(steps, "stability.steps")
     if not rpm > 0:
         raise InputError("rpm > 0", got=rpm, column="rpm", file=str(Path(path)))
     return cut, rpm, steps
@@ -41,7 +55,7 @@ def read_cut(path: str | os.PathLike) -> tuple[Cut, float, int | None]:
 
 def read_sle_cut(path: str | os.PathLike) -> tuple[SleCut, float] | None:
     """(SLE cut, offset in m added to the SLE) of a cut file's `[sle]` section (None when the file has none)."""
-    p = read_params(path)
+    p = _read(path)
     if "sle" not in p:
         return None
     with reading(path, "cut file"):
@@ -49,7 +63,7 @@ def read_sle_cut(path: str | os.PathLike) -> tuple[SleCut, float] | None:
         diameter = float(c["tool_diameter_mm"]) * 1e-3
         offset_m = float(s.get("offset_um", 0.0)) * 1e-6
         return SleCut(
-            teeth=int(c["teeth"]),
+            teeth=whole_number(c["teeth"], "cut.teeth"),
             kt_pa=float(c["kt_mpa"]) * 1e6,
             kn_pa=float(c["kn_mpa"]) * 1e6,
             tool_diameter_m=diameter,

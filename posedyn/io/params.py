@@ -36,6 +36,28 @@ def read_params(path: str | os.PathLike) -> dict:
     return params
 
 
+def check_keys(params: dict, allowed: dict[str, tuple[str, ...]], path: str | os.PathLike, what: str) -> None:
+    """Refuse a table or key the file kind does not have (`allowed`: table -> its keys; [meta]
+    is free): a misspelt optional key would otherwise be ignored and its default used."""
+    for table, values in params.items():
+        if table == "meta":
+            continue
+        if table not in allowed:
+            raise InputError(f"only the tables {', '.join('[' + t + ']' for t in allowed)} in a {what}", got=f"[{table}]", file=str(Path(path)), column=table)
+        if not isinstance(values, dict):
+            raise InputError(f"[{table}] as a table of keys", got=values, file=str(Path(path)), column=table)
+        for key in values:
+            if key not in allowed[table]:
+                raise InputError(f"one of the keys {', '.join(allowed[table])} in [{table}]", got=key, file=str(Path(path)), column=f"{table}.{key}")
+
+
+def whole_number(value, name: str) -> int:
+    """An integer given as a TOML integer (or a float with no fraction), else InputError."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not float(value).is_integer():
+        raise InputError(f"a whole number for {name}", got=value, column=name)
+    return int(value)
+
+
 def flatten(params: dict, prefix: str = "") -> dict[str, object]:
     """{"a": {"b": 1}, "c": [{"d": 2}]} -> {"a.b": 1, "c[1].d": 2}, for summaries."""
     out: dict[str, object] = {}
