@@ -216,10 +216,26 @@ def twin_pose_modes(robot: Robot, params: TwinParameters, poses: PoseSet, index=
     return out
 
 
-def coupled(dyn: ToolTipDynamics, config: ScheduleConfig, field_t: float) -> ToolTipDynamics:
-    """Host plus the MRF absorber at a field (`absorber.coupling.with_absorber`)."""
+def coupled(dyn: ToolTipDynamics, config: ScheduleConfig, field_t: float, response_hz: float | None = None) -> ToolTipDynamics:
+    """Host plus the MRF absorber at a field (`absorber.coupling.with_absorber`), its damping
+    the viscous equivalent of its loss at `response_hz` (`absorber_zeta`)."""
     a = config.absorber
-    return with_absorber(dyn, a.mass_kg, a.stiffness_n_per_m(field_t), a.damping_ratio(field_t), config.directions)
+    return with_absorber(dyn, a.mass_kg, a.stiffness_n_per_m(field_t), absorber_zeta(config, field_t, a.natural_frequency_hz(field_t), response_hz), config.directions)
+
+
+def absorber_zeta(config: ScheduleConfig, field_t: float, absorber_hz: float, response_hz: float | None) -> float:
+    """The absorber's damping ratio as a viscous dashpot, c = 2 zeta sqrt(k m). Its loss is
+    hysteretic (loss factors, `MRFAbsorber.damping_ratio`: a force eta k x at every frequency),
+    and a dashpot gives c w x, growing with frequency: equal at one frequency only. At the
+    absorber's own frequency (the default) a dashpot credits a chatter mode far above it with
+    (f_chatter / f_absorber) times the damping it gets (seen: an 8-63 Hz absorber raising a 5.4 kHz
+    spindle mode's critical depth 5-12 fold). With the frequency the vibration to suppress has
+    (`response_hz`, the chatter frequency) c = eta k / w there: zeta x f_absorber / f_response
+    above the absorber's frequency; below it the resonance value (never more damping)."""
+    zeta = config.absorber.damping_ratio(field_t)
+    if response_hz is None or not math.isfinite(response_hz) or response_hz <= absorber_hz:
+        return zeta
+    return zeta * absorber_hz / response_hz
 
 
 def sims_target_hz(dyn: ToolTipDynamics, config: ScheduleConfig, around_hz: float) -> float:
@@ -231,7 +247,7 @@ def sims_target_hz(dyn: ToolTipDynamics, config: ScheduleConfig, around_hz: floa
         return around_hz
 
     def limit(f):
-        return zoa.absolute_limit_m(coupled(dyn, config, a.field_for_frequency(f).field_t), config.cut)
+        return zoa.absolute_limit_m(coupled(dyn, config, a.field_for_frequency(f).field_t, around_hz), config.cut)
 
     grid = np.linspace(lo, hi, 25)
     values = [limit(f) for f in grid]
@@ -257,25 +273,27 @@ def absorber_setting(dyn: ToolTipDynamics, config: ScheduleConfig, chatter_hz: f
 DEPTH_GRID = 13
 
 
-def coupled_depth_m(dyn: ToolTipDynamics, config: ScheduleConfig, targets_hz, fields_t=None) -> np.ndarray:
+def coupled_depth_m(dyn: ToolTipDynamics, config: ScheduleConfig, targets_hz, fields_t=None, response_hz: float | None = None) -> np.ndarray:
     """Critical depth (m) at the config's cut and speed with the absorber at each frequency: by
     default tuned there by its field (and the damping that field gives); with `fields_t`, at that
     frequency with that field's damping (a trajectory's absorber, its temperature in the
-    frequency). The converged engine, or `steps`."""
+    frequency); the damping as a dashpot at `response_hz` (`absorber_zeta`). The converged
+    engine, or `steps`."""
     targets = np.atleast_1d(np.asarray(targets_hz, dtype=float))
-    return absorber_depths_m([dyn] * len(targets), config, targets, fields_t)
+    return absorber_depths_m([dyn] * len(targets), config, targets, fields_t, response_hz)
 
 
-def absorber_depths_m(dyns: list[ToolTipDynamics], config: ScheduleConfig, targets_hz, fields_t=None) -> np.ndarray:
+def absorber_depths_m(dyns: list[ToolTipDynamics], config: ScheduleConfig, targets_hz, fields_t=None, response_hz=None) -> np.ndarray:
     """`coupled_depth_m` with one host per target (a trajectory's points at several poses), all
-    solved in one batch."""
+    solved in one batch; `response_hz` one value or one per host."""
     a = config.absorber
     targets = np.atleast_1d(np.asarray(targets_hz, dtype=float))
+    response = [None] * len(targets) if response_hz is None else np.broadcast_to(np.asarray(response_hz, dtype=float), targets.shape).tolist()
     if fields_t is None:
-        structures = [coupled(d, config, a.field_for_frequency(float(f), clamp=True).field_t) for d, f in zip(dyns, targets)]
+        structures = [coupled(d, config, a.field_for_frequency(float(f), clamp=True).field_t, r) for d, f, r in zip(dyns, targets, response)]
     else:
-        structures = [with_absorber(d, a.mass_kg, a.mass_kg * (2 * math.pi * f) ** 2, a.damping_ratio(float(b)), config.directions)
-                      for d, f, b in zip(dyns, targets, fields_t)]
+        structures = [with_absorber(d, a.mass_kg, a.mass_kg * (2 * math.pi * f) ** 2, absorber_zeta(config, float(b), float(f), r), config.directions)
+                      for d, f, b, r in zip(dyns, targets, fields_t, response)]
     return np.array([r.depth_m for r in critical_points(structures, config.cut, config.rpm, config.steps, frequencies=False)])
 
 
@@ -286,19 +304,19 @@ def depth_target_hz(dyn: ToolTipDynamics, config: ScheduleConfig, around_hz: flo
     if hi <= lo:
         return float(np.clip(around_hz, *config.absorber.range_hz))
     grid = np.linspace(lo, hi, DEPTH_GRID)
-    values = coupled_depth_m(dyn, config, grid)
+    values = coupled_depth_m(dyn, config, grid, response_hz=around_hz)
     values = np.where(np.isfinite(values), values, -np.inf)
     i = int(np.argmax(values))
     a_, b_ = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
-    best = minimize_scalar(lambda f: -coupled_depth_m(dyn, config, [f])[0], bounds=(a_, b_), method="bounded", options={"xatol": 1e-3 * around_hz, "maxiter": 12})
+    best = minimize_scalar(lambda f: -coupled_depth_m(dyn, config, [f], response_hz=around_hz)[0], bounds=(a_, b_), method="bounded", options={"xatol": 1e-3 * around_hz, "maxiter": 12})
     return float(best.x) if -best.fun > values[i] else float(grid[i])
 
 
-def depth_weight(dyn: ToolTipDynamics, config: ScheduleConfig, target_hz: float, rel_step: float = 0.03) -> float:
+def depth_weight(dyn: ToolTipDynamics, config: ScheduleConfig, target_hz: float, rel_step: float = 0.03, response_hz: float | None = None) -> float:
     """How much critical depth a mistuned absorber costs at a depth-optimal target: the relative
     curvature -(a(f (1 + d)) + a(f (1 - d)) - 2 a(f)) / (d^2 a(f)), so that a relative mistuning
     m loses about weight m^2 / 2 of the depth (0 where the depth does not fall either side)."""
-    a = coupled_depth_m(dyn, config, [target_hz * (1 - rel_step), target_hz, target_hz * (1 + rel_step)])
+    a = coupled_depth_m(dyn, config, [target_hz * (1 - rel_step), target_hz, target_hz * (1 + rel_step)], response_hz=response_hz)
     if not np.all(np.isfinite(a)) or a[1] <= 0:
         return 0.0
     return float(max(0.0, -(a[0] + a[2] - 2 * a[1]) / (rel_step**2 * a[1])))
@@ -334,7 +352,7 @@ def schedule_poses(poses: list[PoseModes], config: ScheduleConfig) -> list[PoseS
             config.absorber.field_for_frequency(target + spread, clamp=True).field_t,
         )
         entries.append((depth, chatter_hz, AbsorberEntry(config.policy, target, setting.field_t, current, feasible, interval)))
-        structures.append(coupled(pose.dyn, config, setting.field_t))
+        structures.append(coupled(pose.dyn, config, setting.field_t, chatter_hz))
     with_absorber = critical_points(structures, config.cut, config.rpm, config.steps, frequencies=False, continuation=True)
     robust = robust_entries(poses, [e[1] for e in entries], [e[2] for e in entries], bare, with_absorber, config) if config.robust_samples else [None] * len(poses)
     out = []
@@ -390,13 +408,13 @@ def robust_entries(poses: list[PoseModes], chatter_hz: list[float], nominal: lis
     todo = [i for i, p in enumerate(poses) if p.distribution is not None]
     samples = {i: poses[i].distribution.sample_dynamics(n, seed) for i in todo}
     bare_check = _needs_verification([poses[i].dyn for i in todo], [bare[i] for i in todo], config)
-    coupled_check = _needs_verification([coupled(poses[i].dyn, config, nominal[i].field_t) for i in todo], [with_absorber[i] for i in todo], config)
+    coupled_check = _needs_verification([coupled(poses[i].dyn, config, nominal[i].field_t, chatter_hz[i]) for i in todo], [with_absorber[i] for i in todo], config)
     bare_depths = _sample_depths([samples[i] for i in todo], bare_check, config)
-    nominal_coupled = _sample_depths([[coupled(d, config, nominal[i].field_t) for d in samples[i]] for i in todo], coupled_check, config)
+    nominal_coupled = _sample_depths([[coupled(d, config, nominal[i].field_t, chatter_hz[i]) for d in samples[i]] for i in todo], coupled_check, config)
     # screened on other samples than those it is judged on: the choice is not fitted to its judges
     candidates = {i: _robust_candidate(poses[i], poses[i].distribution.sample_dynamics(n, seed + 1), chatter_hz[i], nominal[i], config) for i in todo}
     judged = [k for k, i in enumerate(todo) if candidates[i] is not None]
-    robust_coupled = _sample_depths([[coupled(d, config, candidates[todo[k]].field_t) for d in samples[todo[k]]] for k in judged], coupled_check[judged], config)
+    robust_coupled = _sample_depths([[coupled(d, config, candidates[todo[k]].field_t, chatter_hz[todo[k]]) for d in samples[todo[k]]] for k in judged], coupled_check[judged], config)
     out: list[RobustEntry | None] = [None] * len(poses)
     for k, i in enumerate(todo):
         depth_p95, cv = lower95(bare_depths[0][k])
@@ -473,7 +491,7 @@ def _robust_candidate(pose: PoseModes, samples: list[ToolTipDynamics], chatter_h
 
     def guaranteed(target: float) -> float:
         field_t = config.absorber.field_for_frequency(target, clamp=True).field_t
-        depths = [zoa.depth_at_speed(zoa.branches(coupled(d, config, field_t), config.cut, band), config.cut.teeth, config.rpm) for d in samples]
+        depths = [zoa.depth_at_speed(zoa.branches(coupled(d, config, field_t, chatter_hz), config.cut, band), config.cut.teeth, config.rpm) for d in samples]
         return lower95(np.array(depths, dtype=float))[0]
 
     base = guaranteed(nominal.target_hz)

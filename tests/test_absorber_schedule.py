@@ -16,6 +16,7 @@ from posedyn.dynamics import ToolTipDynamics
 from posedyn.io import read_modal_table
 from posedyn.io.cut import read_cut
 
+from posedyn.stability import Cut, critical_points
 from posedyn.stability.timesim import simulate
 from posedyn.table import Mode
 from tests.cli_helpers import run_cli
@@ -45,6 +46,39 @@ def test_an_absorber_damper_across_a_light_spindle_mode_is_a_valid_structure():
     w = 2 * math.pi * np.array([10.0, 40.0, 6000.0])
     direct = [structure.shapes[0] @ np.linalg.solve(K - x**2 * np.eye(3) + 1j * x * C, structure.shapes[0]) for x in w]
     assert np.allclose(structure.frf(w)[:, 0, 0], direct, rtol=1e-10)
+
+
+SPINDLE_CHATTER = """pose_id,x_mm,y_mm,z_mm,beta_deg,direction,mode,fn_hz,zeta,k_n_per_m,k_xy_n_per_m,k_yx_n_per_m
+A,1500,0,700,0,x,1,10,0.04,8.0e5,2.0e6,
+A,1500,0,700,0,y,1,10,0.04,5.0e6,,2.0e6
+A,1500,0,700,0,x,2,5200,0.015,2.5e7,,
+A,1500,0,700,0,y,2,5400,0.012,2.8e7,,
+"""
+
+
+def test_the_absorbers_loss_is_not_credited_as_a_dashpot_at_a_kilohertz_chatter_mode(tmp_path):
+    """The MRF absorber's loss is hysteretic (a force eta k x at any frequency); as a dashpot
+    with its resonance damping (c = 2 zeta sqrt(k m), 180 N s/m) it gave a 5.4 kHz spindle mode
+    85 times the damping, and the schedule reported 44.1 mm with an absorber that cannot reach
+    that mode (3.58 mm bare; a new user's table, 3000 rpm, 2 teeth, 30 %, up). At the chatter
+    frequency the dashpot now gives the hysteretic force: c w = 2 zeta k (closed form), and the
+    depth with the absorber stays near the depth with an undamped one."""
+    from absorber.chain import absorber_zeta
+
+    table = tmp_path / "modes.csv"
+    table.write_text(SPINDLE_CHATTER)
+    cut = Cut(teeth=2, kt_pa=700e6, kn_pa=210e6, radial_immersion=0.3, milling="up")
+    config = ScheduleConfig(cut, 3000.0)
+    a, field = config.absorber, 0.6
+    k, m, f_a = a.stiffness_n_per_m(field), a.mass_kg, a.natural_frequency_hz(field)
+    c = 2.0 * absorber_zeta(config, field, f_a, 5367.0) * math.sqrt(k * m)
+    assert c * 2 * math.pi * 5367.0 == pytest.approx(2.0 * a.damping_ratio(field) * k, rel=1e-12)
+    assert absorber_zeta(config, field, f_a, 0.5 * f_a) == absorber_zeta(config, field, f_a, None) == a.damping_ratio(field)
+    entry, = schedule_poses(table_pose_modes(read_modal_table(table)), config)
+    assert entry.dominant_chatter_hz == pytest.approx(5367.0, rel=0.01) and not entry.absorber.feasible
+    undamped = critical_points([with_absorber(entry.pose.dyn, m, k, 1e-6)], cut, 3000.0)[0].depth_m
+    assert entry.critical_depth_m == pytest.approx(3.58e-3, rel=0.01)
+    assert entry.critical_depth_with_absorber_m < 1.2 * undamped < 1.5 * entry.critical_depth_m  # was 44.1 mm
 
 
 @pytest.fixture(scope="module")

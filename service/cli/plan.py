@@ -100,7 +100,8 @@ def _depths(entries, pose_of_point, frequency_hz, fluid_field_t, config: Schedul
     found = {}
     for key, f, b in zip(keys, frequency_hz, fluid_field_t):
         found.setdefault(key, (f, b))
-    depths = absorber_depths_m([entries[p].pose.dyn for p, _ in found], config, [f for f, _ in found.values()], [b for _, b in found.values()])
+    depths = absorber_depths_m([entries[p].pose.dyn for p, _ in found], config, [f for f, _ in found.values()], [b for _, b in found.values()],
+                               [entries[p].dominant_chatter_hz for p, _ in found])
     out = dict(zip(found, depths))
     return np.array([out[k] for k in keys])
 
@@ -113,7 +114,7 @@ def _weight(entry, config: ScheduleConfig) -> float:
     if config.policy != "depth":
         return 1.0
     a = entry.absorber
-    curvature = depth_weight(entry.pose.dyn, config, a.target_hz)
+    curvature = depth_weight(entry.pose.dyn, config, a.target_hz, response_hz=entry.dominant_chatter_hz)
     spread = entry.pose.lowest_xy[5] / (config.absorber.damping_ratio(a.field_t) * a.target_hz)
     return 1e-3 + curvature / (1.0 + spread**2)
 

@@ -196,7 +196,8 @@ def representative_lobes(spec_json: str, poses: PoseSet, rows: list[dict], grid_
             continue
         chosen.append((label, i))
         field_t = rows[i]["field_mt"] * 1e-3
-        jobs += [(dyn, ctx.schedule.cut, rpm, ctx.schedule.steps) for dyn in (found[i].dyn, coupled(found[i].dyn, ctx.schedule, field_t))]
+        chatter_hz = rows[i].get("dominant_chatter_hz")
+        jobs += [(dyn, ctx.schedule.cut, rpm, ctx.schedule.steps) for dyn in (found[i].dyn, coupled(found[i].dyn, ctx.schedule, field_t, chatter_hz))]
     curves = (mapper or (lambda fn, items: [fn(x) for x in items]))(lobe_depths_mm, jobs)
     return [{"label": label, "pose_id": poses.pose_id[i], "rpm": rpm.tolist(), "depth_mm": curves[2 * q], "depth_with_absorber_mm": curves[2 * q + 1],
              "field_mt": rows[i]["field_mt"], "cut_rpm": ctx.schedule.rpm} for q, (label, i) in enumerate(chosen)]
