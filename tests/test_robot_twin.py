@@ -228,3 +228,18 @@ def test_twin_modes_cli_and_bad_grid(datasets, tmp_path):
     result = run_cli("twin", "campaign", "--grid", bad, "--out", tmp_path / "o.csv")
     assert result.returncode == 2 and "z_mm" in result.stderr and "grid.toml" in result.stderr and "Traceback" not in result.stderr
     assert not (tmp_path / "o.csv").exists()
+
+
+def test_an_unreachable_pose_is_named_by_its_row_and_id(tmp_path):
+    """`posedyn schedule MODEL --poses P.csv` with one pose out of reach stopped with 'expected a
+    tool-tip position inside the robot's reach' and no file, row or pose_id."""
+    from posedyn.io import read_pose_table
+    from posedyn.io.twin_file import load_twin
+    from posedyn.posemodel.model import pose_joints
+
+    path = tmp_path / "poses.csv"
+    path.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nok,1500,0,600,0\nfar,5000,0,600,0\n")
+    robot, _ = load_twin(None)
+    with pytest.raises(InputError) as err:
+        pose_joints(robot, read_pose_table(path))
+    assert err.value.row == 2 and err.value.column == "pose far" and "reach" in str(err.value)

@@ -161,7 +161,13 @@ def pose_joints(robot, poses: PoseSet) -> np.ndarray:
     if poses.joints_deg is not None:
         return np.radians(poses.joints_deg)
     data = robot.model.createData()
-    return np.array([robot.inverse(tool_pose(poses, i), data) for i in range(len(poses))])
+    q = []
+    for i in range(len(poses)):
+        try:
+            q.append(robot.inverse(tool_pose(poses, i), data))
+        except InputError as exc:  # which pose: the caller adds the file
+            raise exc.located(row=i + 1, column=f"pose {poses.pose_id[i]}") from None
+    return np.array(q)
 
 
 def _twin_log_values(robot, params, q: np.ndarray, targets: list[str], robot_modes: int, inertias=None) -> np.ndarray:

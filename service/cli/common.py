@@ -74,7 +74,10 @@ def modal_input_for(model_dir: Optional[Path], modes: Optional[Path], poses, dis
         table = table.select_poses([table.poses.index(p) for p in pose_set.pose_id])
         return table, distributions_from_table(table) if distributions else None
     model = load_model(model_dir)
-    table = model.predict_table(pose_set)
+    try:
+        table = model.predict_table(pose_set)
+    except InputError as exc:
+        raise exc.located(file=None if isinstance(poses, PoseSet) else str(poses)) from None
     return table, model.predict_distributions(pose_set, table) if distributions else None
 
 
