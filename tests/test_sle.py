@@ -163,3 +163,20 @@ def test_up_milling_surface_normal_is_plus_y(robot):
         y = compliance * np.mean(normal_force(cut, surface + chi * np.arange(20), 20))
         assert sle_quasi_static_m(robot, cut) == pytest.approx(sign * y, rel=1e-12)
         assert sle_m(robot, cut, 0.1)[0] == pytest.approx(sign * y, rel=1e-3)
+
+
+def test_sle_says_when_the_cut_chatters(tmp_path):
+    """A new user's SLE at 5 mm axial depth where the cut's critical depth is 0.43 mm (a 10 Hz
+    robot mode, 600 rpm, 2 teeth): 'SLE 61.318 um' with no warning. `--stability` adds the
+    critical depth and the verdict; without it the text says the SLE assumes a stable cut."""
+    modes = tmp_path / "b.csv"
+    modes.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg,direction,mode,fn_hz,zeta,k_n_per_m\n"
+                     "B,1500,0,700,0,x,1,10,0.04,8e5\nB,1500,0,700,0,x,2,1450,0.06,3.3e7\nB,1500,0,700,0,x,3,5200,0.015,2.5e7\n"
+                     "B,1500,0,700,0,y,1,10.8,0.035,1.1e6\nB,1500,0,700,0,y,2,1480,0.05,6e7\nB,1500,0,700,0,y,3,5400,0.012,2.8e7\n")
+    args = ["sle", "--modes", str(modes), "--direction", "y", "--rpm", "600", "--teeth", "2", "--kt-mpa", "700", "--kn-mpa", "210", "--tool-diameter-mm", "6",
+            "--helix-deg", "30", "--radial-depth-mm", "3", "--feed-per-tooth-mm", "0.05", "--milling", "down"]
+    out = json.loads(run_cli(*args, "--axial-depth-mm", "5", "--stability", "--json").stdout)
+    assert out["stable"] is False and out["critical_depth_mm"] == pytest.approx(0.4263, rel=0.02)
+    assert "CHATTERS" in run_cli(*args, "--axial-depth-mm", "5", "--stability").stdout
+    assert json.loads(run_cli(*args, "--axial-depth-mm", "0.3", "--stability", "--json").stdout)["stable"] is True
+    assert "stable cut" in run_cli(*args, "--axial-depth-mm", "5").stdout

@@ -14,7 +14,15 @@ from posedyn.errors import InputError
 from posedyn.io import read_modal_table
 from posedyn.sle import SleCut
 from posedyn.sle import compensate, sle_m
-from service.cli.common import Milling, console, print_json
+from posedyn.stability import Cut, critical_lobes
+from service.cli.common import Milling, console, finite_or_none, print_json
+
+
+def _stability(dyn: ToolTipDynamics, cut: SleCut, rpm: np.ndarray) -> np.ndarray:
+    """Critical depth (m) of the SLE's cut at each speed (converged engine, straight flutes):
+    the SLE is the error of a stable cut; above that depth the cut chatters and it means nothing."""
+    stability_cut = Cut(teeth=cut.teeth, kt_pa=cut.kt_pa, kn_pa=cut.kn_pa, radial_immersion=min(1.0, cut.radial_depth_m / cut.tool_diameter_m), milling=cut.milling)
+    return np.array([r.depth_m for r in critical_lobes(dyn, stability_cut, rpm, workers=2)])
 
 
 
@@ -59,6 +67,7 @@ def sle(
     slices: int = typer.Option(20, "--axial-slices"),
     offset_um: float = typer.Option(0.0, "--offset-um", help="Robot path offset added to the SLE (seed 001 Table 2)."),
     tolerance_um: float = typer.Option(2.0, "--tolerance-um", help="compensate: stop when the part error is below this."),
+    stability: bool = typer.Option(False, "--stability", help="Also whether the cut is stable at each speed (its critical depth by the converged engine: the SLE is the error of a stable cut; a second to minutes a speed, with many modes)."),
     as_json: bool = typer.Option(False, "--json"),
 ):
     """SLE at one speed (--rpm) or over a range (--rpm-min --rpm-max --rpm-steps); `posedyn sle compensate ...` iterates the radial depth."""
@@ -86,17 +95,32 @@ def sle(
         return
     if rpm is not None:
         value = float(sle_m(dyn, cut, rpm, slices, offset_m=offset)[0])
+        out = {"sle_um": value * 1e6}
+        if stability:
+            critical = float(_stability(dyn, cut, np.array([rpm]))[0])
+            out.update(critical_depth_mm=finite_or_none(critical * 1e3), stable=bool(cut.axial_depth_m < critical))
         if as_json:
-            print_json({"sle_um": value * 1e6})
-        else:
-            console.print(f"SLE {value * 1e6:.3f} um ({'undercut' if value > 0 else 'overcut'}) at {rpm:g} rpm")
+            print_json(out)
+            return
+        console.print(f"SLE {value * 1e6:.3f} um ({'undercut' if value > 0 else 'overcut'}) at {rpm:g} rpm")
+        if not stability:
+            console.print("  (the SLE of a stable cut: --stability checks that the cut does not chatter)")
+        elif not out["stable"]:
+            console.print(f"  the cut CHATTERS: axial depth {cut.axial_depth_m * 1e3:g} mm is above the critical depth {critical * 1e3:.4g} mm; the SLE of a stable cut does not apply")
         return
     if rpm_min is None or rpm_max is None or not 0 < rpm_min < rpm_max or rpm_steps < 2:
         raise InputError("--rpm, or 0 < --rpm-min < --rpm-max with --rpm-steps >= 2", column="--rpm")
     speeds = np.linspace(rpm_min, rpm_max, rpm_steps)
     values = sle_m(dyn, cut, speeds, slices, offset_m=offset)
     out = {"rpm": speeds.tolist(), "sle_um": (values * 1e6).tolist()}
+    if stability:
+        stable = cut.axial_depth_m < _stability(dyn, cut, speeds)
+        out["stable"] = stable.tolist()
     if as_json:
         print_json(out)
-    else:
-        console.print(f"SLE from {values.min() * 1e6:.2f} to {values.max() * 1e6:.2f} um over {rpm_min:g}-{rpm_max:g} rpm")
+        return
+    console.print(f"SLE from {values.min() * 1e6:.2f} to {values.max() * 1e6:.2f} um over {rpm_min:g}-{rpm_max:g} rpm")
+    if not stability:
+        console.print("  (the SLE of a stable cut: --stability checks that the cut does not chatter)")
+    elif not stable.all():
+        console.print(f"  the cut CHATTERS at {int((~stable).sum())} of {len(speeds)} speeds (axial depth above the critical depth): their SLE does not apply (--json: 'stable')")
