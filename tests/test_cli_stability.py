@@ -47,8 +47,10 @@ def test_chatter_needs_a_pose_when_the_table_has_several(datasets):
 def test_chatter_rejects_a_bad_cut(datasets):
     args = ["chatter", "--modes", datasets / "seeds/hou2023_positions.csv", "--pose-id", "P5", "--rpm", 2000]
     bad = ["--teeth", "3", "--kt-mpa", "796", "--kn-mpa", "169", "--radial-immersion", "1.5"]
-    result = posedyn(*args, *bad)
-    assert result.returncode == 2 and "radial_immersion" in result.stderr and "hou2023_positions.csv" in result.stderr
+    result = posedyn(*args, *bad)  # the flag, not the modal table the value did not come from
+    assert result.returncode == 2 and "--radial-immersion" in result.stderr and "1.5" in result.stderr and "hou2023_positions.csv" not in result.stderr
+    result = posedyn(*args, "--teeth", "3", "--kt-mpa", "-700", "--kn-mpa", "169", "--radial-immersion", "0.5")
+    assert result.returncode == 2 and "--kt-mpa" in result.stderr and "-700" in result.stderr and "kt_pa" not in result.stderr
 
 
 @pytest.mark.parametrize("method", ["floquet", "sdm", "zoa"])

@@ -3,6 +3,7 @@ model's predictions or the robot twin's own modes)."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -39,6 +40,29 @@ def output_file(path: Path | None, option: str) -> Path | None:
     if not os.access(folder, os.W_OK):
         raise InputError("a file in a folder this user can write", got=f"folder {folder} is read-only", file=str(path), column=option)
     return path
+
+
+#: Library field -> (the command-line flag that gives it, factor from SI to the flag's unit).
+FLAGS = {
+    "teeth": ("--teeth", None), "kt_pa": ("--kt-mpa", 1e-6), "kn_pa": ("--kn-mpa", 1e-6), "radial_immersion": ("--radial-immersion", None),
+    "milling": ("--milling", None), "feed_angle_deg": ("--feed-angle-deg", None), "tool_diameter_m": ("--tool-diameter-mm", 1e3),
+    "radial_depth_m": ("--radial-depth-mm", 1e3), "axial_depth_m": ("--axial-depth-mm", 1e3), "feed_per_tooth_m": ("--feed-per-tooth-mm", 1e3),
+    "helix_rad": ("--helix-deg", 180.0 / math.pi),
+}
+
+
+@contextlib.contextmanager
+def flag_errors():
+    """An InputError about a value that came from a flag names the flag and gives the value in
+    the flag's unit (not the library's field in SI: 'column kt_pa ... got -700000000.0')."""
+    try:
+        yield
+    except InputError as exc:
+        if exc.column not in FLAGS or exc.file is not None:
+            raise
+        flag, factor = FLAGS[exc.column]
+        got = exc.got * factor if factor is not None and isinstance(exc.got, (int, float)) else exc.got
+        raise InputError(exc.expected, got=got, column=flag) from None
 
 
 def finite_or_none(value: float):

@@ -15,7 +15,7 @@ from posedyn.io import read_modal_table
 from posedyn.sle import SleCut
 from posedyn.sle import compensate, sle_m
 from posedyn.stability import Cut, critical_lobes
-from service.cli.common import Milling, console, finite_or_none, print_json
+from service.cli.common import Milling, console, finite_or_none, flag_errors, print_json
 
 
 def _stability(dyn: ToolTipDynamics, cut: SleCut, rpm: np.ndarray) -> np.ndarray:
@@ -38,10 +38,11 @@ def _inputs(modes, extra, pose_id, teeth, kt_mpa, kn_mpa, tool_diameter_mm, heli
     dyn = combine(*parts)
     if direction == "x":  # the surface normal is x: turn the axes so that it becomes y
         dyn = dyn.rotated(-math.pi / 2)
-    cut = SleCut(
-        teeth=teeth, kt_pa=kt_mpa * 1e6, kn_pa=kn_mpa * 1e6, tool_diameter_m=tool_diameter_mm * 1e-3, helix_rad=math.radians(helix_deg),
-        radial_depth_m=radial_depth_mm * 1e-3, axial_depth_m=axial_depth_mm * 1e-3, feed_per_tooth_m=feed_per_tooth_mm * 1e-3, milling=milling.value,
-    )
+    with flag_errors():
+        cut = SleCut(
+            teeth=teeth, kt_pa=kt_mpa * 1e6, kn_pa=kn_mpa * 1e6, tool_diameter_m=tool_diameter_mm * 1e-3, helix_rad=math.radians(helix_deg),
+            radial_depth_m=radial_depth_mm * 1e-3, axial_depth_m=axial_depth_mm * 1e-3, feed_per_tooth_m=feed_per_tooth_mm * 1e-3, milling=milling.value,
+        )
     return dyn, cut
 
 

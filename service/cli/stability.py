@@ -18,7 +18,7 @@ from posedyn.errors import InputError
 from posedyn.io import read_modal_table
 from posedyn.io.atomic import write_text_atomic
 from posedyn.stability import Cut, Discretization, StabilityModel, StabilityResult, absolute_limit, critical_lobes, critical_points, zoa
-from service.cli.common import Milling, console, finite_or_none, output_file, print_json
+from service.cli.common import Milling, console, finite_or_none, flag_errors, output_file, print_json
 
 
 class Method(str, Enum):
@@ -44,6 +44,9 @@ def _setup(modes: Path, pose_id, teeth, kt_mpa, kn_mpa, radial_immersion, millin
     table = read_modal_table(modes)
     try:
         dyn = ToolTipDynamics.from_table(table, pose_id)
+    except InputError as exc:
+        raise exc.located(file=str(modes)) from None
+    with flag_errors():
         cut = Cut(
             teeth=teeth,
             kt_pa=kt_mpa * 1e6,
@@ -53,8 +56,6 @@ def _setup(modes: Path, pose_id, teeth, kt_mpa, kn_mpa, radial_immersion, millin
             feed_angle_deg=feed_angle_deg,
         )
         disc = Discretization(steps=steps or 40, order=order)
-    except InputError as exc:
-        raise exc.located(file=str(modes)) from None
     pose = pose_id if pose_id is not None else table.poses.pose_id[0]
     return pose, StabilityModel(dyn, cut, disc)
 
