@@ -15,6 +15,31 @@ from posedyn.identify import direct_modal_parameters, matrix_modal_fit
 from posedyn.table import ModalTable, PoseSet
 
 
+#: A mode of the matrix fit whose direct residue in one direction is below this share of the
+#: two is a mode of the other direction alone (its row there would have a modal stiffness of
+#: noise, 1e20 N/m and cross terms of 1e14 of either sign, which the table format refuses).
+SINGLE_DIRECTION = 0.01
+
+
+def _matrix_mode_rows(mode) -> list:
+    """[(direction, k_direct, k_cross or NaN)] of one common-pole mode (shapes L, R; residue
+    L_i R_j / w^2 = 1 / k_ij): one row where it lives in one direction only, two uncoupled rows
+    where the cross terms' signs disagree (coupling within the noise: the format needs k_xy and
+    k_yx of one sign), else the two coupled rows (rank one: k_yy = k_xy k_yx / k_xx exactly)."""
+    w2 = (2 * math.pi * mode["fn_hz"]) ** 2
+    (lx, ly), (rx, ry) = mode["shape_left"], mode["shape_right"]
+    rxx, ryy = abs(lx * rx), abs(ly * ry)
+    share_y = ryy / (rxx + ryy)
+    if share_y < SINGLE_DIRECTION:
+        return [("x", w2 / (lx * rx), np.nan)]
+    if share_y > 1.0 - SINGLE_DIRECTION:
+        return [("y", w2 / (ly * ry), np.nan)]
+    k_xy, k_yx = w2 / (lx * ry), w2 / (ly * rx)
+    if np.sign(k_xy) != np.sign(k_yx):
+        return [("x", w2 / (lx * rx), np.nan), ("y", w2 / (ly * ry), np.nan)]
+    return [("x", w2 / (lx * rx), k_xy), ("y", w2 / (ly * ry), k_yx)]
+
+
 def fit_table(frfs, fmin_hz=None, fmax_hz=None, max_order: int = 40, modes: Optional[int] = None):
     """A ModalTable (one pose per FRF set) and, per pose, what the fits found (for plots)."""
     rows = {k: [] for k in ("pose_index", "direction", "mode", "fn_hz", "zeta", "k_n_per_m")}
@@ -30,9 +55,7 @@ def fit_table(frfs, fmin_hz=None, fmax_hz=None, max_order: int = 40, modes: Opti
             coupled = coupled[:modes] if modes else coupled
             has_cross = True
             for m, mode in enumerate(coupled, 1):
-                w2 = (2 * math.pi * mode["fn_hz"]) ** 2
-                (lx, ly), (rx, ry) = mode["shape_left"], mode["shape_right"]
-                for d, k_direct, k_cross, name in (("x", w2 / (lx * rx), w2 / (lx * ry), "k_xy_n_per_m"), ("y", w2 / (ly * ry), w2 / (ly * rx), "k_yx_n_per_m")):
+                for d, k_direct, k_cross in _matrix_mode_rows(mode):
                     rows["pose_index"].append(p)
                     rows["direction"].append(d)
                     rows["mode"].append(m)
@@ -41,8 +64,8 @@ def fit_table(frfs, fmin_hz=None, fmax_hz=None, max_order: int = 40, modes: Opti
                     rows["k_n_per_m"].append(abs(k_direct))
                     for key in std:
                         std[key].append(np.nan)
-                    cross["k_xy_n_per_m"].append(k_cross if name == "k_xy_n_per_m" else np.nan)
-                    cross["k_yx_n_per_m"].append(k_cross if name == "k_yx_n_per_m" else np.nan)
+                    cross["k_xy_n_per_m"].append(k_cross if d == "x" else np.nan)
+                    cross["k_yx_n_per_m"].append(k_cross if d == "y" else np.nan)
             found["matrix"] = (coupled, rebuilt)
         else:
             for d in "xyz":

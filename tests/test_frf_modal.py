@@ -204,3 +204,31 @@ def test_a_predicted_coupled_mode_is_one_rank_one_mode_that_the_parser_reads_bac
     assert np.allclose(predicted.k_n_per_m[yr], predicted.cross["k_xy_n_per_m"][xr] * predicted.cross["k_yx_n_per_m"][yr] / predicted.k_n_per_m[xr])
     back = parse_modal_table(format_modal_table(predicted), "predicted.csv")
     assert np.array_equal(back.k_n_per_m, predicted.k_n_per_m)
+
+
+def test_a_matrix_fit_writes_a_mode_seen_in_one_direction_as_one_uncoupled_row(tmp_path):
+    """A new user's x-y FRF matrix (1 % noise): a coupled 10 Hz mode (kxx 8e5, kxy = kyx 2e6,
+    kyy 5e6 N/m) and uncoupled spindle modes at 5.2 kHz in x and 5.4 kHz in y. The fit wrote
+    each spindle mode in both directions, the other one with a stiffness of noise (1e20 N/m) and
+    cross terms of 1e14 of opposite signs, a table every command then refused. Now a mode
+    living in one direction is one row there, and the table reads back."""
+    from posedyn.modal_fit import fit_table
+    from posedyn.io import write_modal_table
+
+    rng = np.random.default_rng(1)
+    f = np.concatenate([np.linspace(2, 200, 800), np.linspace(200.5, 8000, 3000)])
+    coupled = receptance(f, [(10.0, 0.04, 1.0)])  # unit stiffness: scaled per entry below
+    H = {"h_xx": coupled / 8e5 + receptance(f, [(5200.0, 0.015, 2.5e7)]), "h_yy": coupled / 5e6 + receptance(f, [(5400.0, 0.012, 2.8e7)]),
+         "h_xy": coupled / 2e6, "h_yx": coupled / 2e6}
+    H = {k: v * (1 + 0.01 * (rng.standard_normal(len(f)) + 1j * rng.standard_normal(len(f)))) for k, v in H.items()}
+    table, _ = fit_table([FRFSet(f, H, pose_id="A", pose={"x_mm": 1500.0, "y_mm": 0.0, "z_mm": 700.0, "beta_deg": 0.0})])
+    write_modal_table(table, tmp_path / "fit.csv")
+    back = read_modal_table(tmp_path / "fit.csv")
+    rows = sorted(zip(back.direction, np.round(back.fn_hz), back.k_n_per_m, back.cross["k_xy_n_per_m"], back.cross["k_yx_n_per_m"]))
+    assert [(d, fn) for d, fn, *_ in rows] == [("x", 10.0), ("x", 5200.0), ("y", 10.0), ("y", 5400.0)]
+    expected = {("x", 10.0): (8e5, 2e6, None), ("x", 5200.0): (2.5e7, None, None), ("y", 10.0): (5e6, None, 2e6), ("y", 5400.0): (2.8e7, None, None)}
+    for d, fn, k, kxy, kyx in rows:
+        k_true, kxy_true, kyx_true = expected[(d, fn)]
+        assert k == pytest.approx(k_true, rel=0.03)
+        for got, true in ((kxy, kxy_true), (kyx, kyx_true)):
+            assert (np.isnan(got) and true is None) or got == pytest.approx(true, rel=0.03)
