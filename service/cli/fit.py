@@ -11,10 +11,9 @@ import typer
 
 from posedyn.errors import InputError
 from posedyn.identify import lscf_poles
-from posedyn.identify import IdentifiedMode, lsfd
 from posedyn.io import write_modal_table
 from posedyn.io.frf import FRFSet, read_frf
-from posedyn.modal_fit import fit_table
+from posedyn.modal_fit import fit_misses, fit_table, fitted_frfs
 from service.cli.common import console, output_file, print_json
 
 
@@ -47,10 +46,13 @@ def fit(
     if plot is not None:
         _plots(plot, frfs, fits, fmin_hz, fmax_hz, max_order)
     summary = table.summary()
+    warnings = fit_misses(frfs, fits, fmin_hz, fmax_hz)
     if as_json:
-        print_json({"out": str(out), "poses": summary["poses"], "modes": summary["modes"], "coupled": bool(table.cross)})
+        print_json({"out": str(out), "poses": summary["poses"], "modes": summary["modes"], "coupled": bool(table.cross), "warnings": warnings})
     else:
         console.print(f"wrote {out}: {summary['rows']} modes at {summary['poses']} poses ({', '.join(f'{d}: {n}' for d, n in summary['modes'].items())})")
+        for line in warnings:
+            console.print(f"warning: {line}")
 
 
 def _plots(folder: Path, frfs, fits, fmin_hz, fmax_hz, max_order):
@@ -70,10 +72,8 @@ def _plots(folder: Path, frfs, fits, fmin_hz, fmax_hz, max_order):
             for name, h in found["matrix"][1].items():
                 axes[0].semilogy(f, np.abs(h), "--", lw=1, label=f"{name} fitted")
         else:
-            for name, params in found.items():
-                modes = [IdentifiedMode(p["fn_hz"], p["zeta"], 0, 0) for p in params]
-                _, _, rebuilt = lsfd(f, frf.frf[name], modes)
-                axes[0].semilogy(f, np.abs(rebuilt[:, 0]), "--", lw=1, label=f"{name} fitted")
+            for name, h in fitted_frfs(frf, found).items():
+                axes[0].semilogy(f, np.abs(h), "--", lw=1, label=f"{name} fitted")
         axes[0].set_ylabel("|H| (m/N)")
         axes[0].legend(fontsize=7)
         name = next(iter(sorted(frf.frf)))
