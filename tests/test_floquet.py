@@ -181,3 +181,15 @@ def test_the_repairs_newton_starts_skip_a_monodromy_that_overflows():
     assert not np.all(np.isfinite(M))  # the case is the overflow
     depths, thetas = converged._newton_from_nearest(char, tau, 1e4, 16, 4)
     assert np.all(np.isfinite(depths)) and len(depths) == len(thetas)
+
+
+def test_a_period_doubling_familys_mirror_members_are_one_frequency():
+    """At theta = pi every member +w of the Floquet family has its mirror -w, the same frequency
+    of the real motion: `chatter` listed '10 (100%), 10 (100%) Hz' (a 10 Hz robot mode, 600 rpm,
+    2 teeth). Each frequency is listed once, its members' powers added."""
+    dyn = ToolTipDynamics.from_modes(x=[Mode(10.0, 0.04, 8e5), Mode(1450.0, 0.06, 3.3e7), Mode(5200.0, 0.015, 2.5e7)],
+                                     y=[Mode(10.8, 0.035, 1.1e6), Mode(1480.0, 0.05, 6e7), Mode(5400.0, 0.012, 2.8e7)])
+    point = converged.critical_depth(dyn, Cut(teeth=2, kt_pa=700e6, kn_pa=210e6, radial_immersion=0.5, milling="down"), 600.0)
+    assert point.theta_rad == pytest.approx(np.pi) and point.chatter_hz == pytest.approx(10.0)
+    frequencies = [hz for hz, _ in point.family]
+    assert len(frequencies) == len(set(np.round(frequencies, 6))) and point.family[0] == (point.chatter_hz, 1.0)

@@ -1580,10 +1580,16 @@ def _families(char, a, theta, tau, K, keep):
     freq = np.abs(omega) / (2.0 * np.pi)
     out = []
     for b in range(B):
-        order = np.argsort(-amplitude[b])
-        top_amp = amplitude[b, order[0]]
-        family = tuple((float(freq[b, k]), float(amplitude[b, k] / top_amp)) for k in order if amplitude[b, k] >= keep * top_amp)
-        out.append((float(freq[b, order[0]]), family))
+        # members +-w are one frequency of the real motion (every member has its mirror at
+        # theta = 0 or pi: period doubling listed '10 (100%), 10 (100%) Hz'): their powers added
+        _, inverse, count = np.unique(np.round(freq[b] * tau[b] * 1e6), return_inverse=True, return_counts=True)  # within 1e-6 tooth frequencies
+        inverse = inverse.ravel()
+        f_b = np.bincount(inverse, weights=freq[b]) / count
+        a_b = np.sqrt(np.bincount(inverse, weights=amplitude[b] ** 2))
+        order = np.argsort(-a_b)
+        top_amp = a_b[order[0]]
+        family = tuple((float(f_b[k]), float(a_b[k] / top_amp)) for k in order if a_b[k] >= keep * top_amp)
+        out.append((float(f_b[order[0]]), family))
     return out
 
 
