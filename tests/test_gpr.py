@@ -354,3 +354,11 @@ def test_train_and_predict_cli_contract(datasets, tmp_path):
     bad.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nnew,1450,zero,800,0\n")
     result = posedyn("predict", tmp_path / "m", "--poses", bad)
     assert result.returncode == 2 and "bad.csv, row 1 (line 2), column 'y_mm'" in result.stderr
+
+
+def test_r2_is_undefined_where_the_values_vary_only_by_rounding():
+    """A constant column (zeta 0.04 at every pose) whose copies differ in the last bit: the
+    per-fold R2 was undefined and the pooled one -7e16."""
+    actual = np.array([0.04, 0.04 + 7e-18, 0.04, 0.04 - 7e-18])
+    assert math.isnan(r2_score(actual + 1e-6, actual))
+    assert r2_score(np.array([1.0, 2.1, 2.9]), np.array([1.0, 2.0, 3.0])) == pytest.approx(0.99)

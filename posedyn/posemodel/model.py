@@ -384,9 +384,13 @@ def _one_mode_per_coupled_pair(rows: dict, cross: dict) -> None:
 
 
 def r2_score(predicted: np.ndarray, actual: np.ndarray) -> float:
-    """Coefficient of determination (seed 003 eq. 31)."""
+    """Coefficient of determination (seed 003 eq. 31); NaN where the values do not vary (a
+    spread of rounding, relative 1e-10, counts as none: a constant zeta column whose copies
+    differed in the last bit gave a pooled R2 of -7e16)."""
     ss = np.sum((actual - actual.mean()) ** 2)
-    return float(1.0 - np.sum((predicted - actual) ** 2) / ss) if ss > 0 else float("nan")
+    if not ss > 1e-20 * len(actual) * np.mean(actual**2):
+        return float("nan")
+    return float(1.0 - np.sum((predicted - actual) ** 2) / ss)
 
 
 def cross_validate(make_model, table: ModalTable, folds: int = 5, seed: int = 0) -> dict:
