@@ -196,6 +196,20 @@ def test_tls_works_and_a_client_without_the_certificate_is_refused(model_dir, tm
         proc.communicate(timeout=30)
 
 
+def test_query_reads_its_request_before_connecting_and_an_unreachable_service_is_no_reply():
+    """A query to an endpoint where nothing listens exited 2 ('column --connect', as for bad
+    input) although the README says no reply exits 3, and a malformed --pose-json was found only
+    after connecting. The request is read first (exit 2 at once), and a session that reaches
+    nothing is exit 3 'no_session'."""
+    from tests.cli_helpers import run_cli
+
+    nowhere = f"tcp/127.0.0.1:{free_port()}"
+    bad = run_cli("query", "--cell", "c", "--connect", nowhere, "--pose-json", "{not json", "--timeout-s", "2")
+    assert bad.returncode == 2 and "--pose-json" in bad.stderr
+    unreachable = run_cli("query", "--cell", "c", "--connect", nowhere, "--pose-json", json.dumps(P5), "--timeout-s", "2")
+    assert unreachable.returncode == 3 and "no_session" in unreachable.stderr and nowhere in unreachable.stderr
+
+
 def test_query_cli_reports_errors_and_zero_replies(service, tmp_path):
     base = [sys.executable, "-c", "from service.cli import main; main()", "query", "--cell", "cell1", "--connect", service[1], "--timeout-s", "20"]
     ok = subprocess.run(base + ["--pose-json", json.dumps(P5), "--json"], capture_output=True, text=True, cwd=ROOT, timeout=120)

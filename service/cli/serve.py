@@ -114,20 +114,25 @@ def query(
         raise InputError("either --pose-json or --plan", column="--pose-json")
     cut = _json_option(cut_json, "--cut-json") if cut_json else None
     key = read_key(signing_key) if signing_key else None
+    pose = rows = times = None  # the request read before connecting: a bad one is exit 2 without a wait
+    if pose_json is not None:
+        pose = _json_option(pose_json, "--pose-json")
+    else:
+        if "time_s" in plan.read_text(encoding="utf-8", errors="replace").splitlines()[0].split(","):
+            path_poses, times = read_tool_path(plan)  # a timed path: the plan carries the coil's trajectory
+            rows, times = path_poses.records(), times.tolist()
+        else:
+            rows = read_pose_table(plan).records()
     try:
         client = ScheduleClient(cell, connect=connect, config=config, timeout_s=timeout_s, service_id=service_id, signing_key=key).open()
-    except Exception as exc:  # noqa: BLE001 - zenoh could not open (no route, TLS refused)
-        raise InputError("a Zenoh session that connects", got=str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__, column="--connect") from None
+    except Exception as exc:  # noqa: BLE001 - zenoh could not open (no route, TLS refused): no service answered, as a missing reply
+        reason = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
+        print(f"error: no_session: could not reach {', '.join(connect) or 'a Zenoh peer'}: {reason}", file=sys.stderr)
+        raise typer.Exit(3)
     try:
-        if pose_json is not None:
-            result = client.schedule(_json_option(pose_json, "--pose-json"), cut)
+        if pose is not None:
+            result = client.schedule(pose, cut)
         else:
-            times = None
-            if "time_s" in plan.read_text(encoding="utf-8", errors="replace").splitlines()[0].split(","):
-                path_poses, times = read_tool_path(plan)  # a timed path: the plan carries the coil's trajectory
-                rows, times = path_poses.records(), times.tolist()
-            else:
-                rows = read_pose_table(plan).records()
             result = client.plan(plan_id or plan.stem, rows, cut, timeout_s=max(timeout_s, 2.0 * len(rows)), times_s=times)
     except ServiceError as exc:
         print(f"error: {exc.code}: {exc.message}", file=sys.stderr)
