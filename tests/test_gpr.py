@@ -362,3 +362,19 @@ def test_r2_is_undefined_where_the_values_vary_only_by_rounding():
     actual = np.array([0.04, 0.04 + 7e-18, 0.04, 0.04 - 7e-18])
     assert math.isnan(r2_score(actual + 1e-6, actual))
     assert r2_score(np.array([1.0, 2.1, 2.9]), np.array([1.0, 2.0, 3.0])) == pytest.approx(0.99)
+
+
+def test_the_workspace_the_service_serves_is_the_models_and_schedule_warns_beyond_it(datasets, tmp_path):
+    """`posedyn serve` refused x = 1000 mm ('outside_workspace') while `posedyn schedule` on the
+    same model answered it without a word. One rule (PoseModel.workspace_bounds) for both; the
+    schedule now warns on stderr (its --json stays strict)."""
+    from posedyn.table import PoseSet
+
+    model = PoseModel("stgp").fit(read_modal_table(datasets / "seeds/hou2023_positions.csv"))
+    assert model.workspace_bounds()["x_mm"] == pytest.approx((1050.0, 1950.0))
+    poses = PoseSet.from_columns(("P5", "x1000"), {"x_mm": [1400.0, 1000.0], "y_mm": [0.0, 0.0], "z_mm": [800.0, 800.0], "beta_deg": [0.0, 0.0]})
+    assert model.outside_workspace(poses) == ["pose x1000: x_mm = 1000 outside [1050, 1950]"]
+    save_model(model, tmp_path / "m")
+    (tmp_path / "poses.csv").write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nx1000,1000,0,800,0\n")
+    result = run_cli("predict", tmp_path / "m", "--poses", tmp_path / "poses.csv", "--json")
+    assert result.returncode == 0 and "outside_workspace" in result.stderr and "x1000" in result.stderr

@@ -330,6 +330,22 @@ class PoseModel:
         std = np.where(cross, s / np.where(mu != 0, mu, np.inf) ** 2, mean * np.sqrt(np.expm1(s**2)))
         return mean, std
 
+    def workspace_bounds(self) -> dict[str, tuple[float, float]]:
+        """{feature: (lo, hi)}: the training range of each pose feature widened by a quarter of
+        it, at least 50 mm or 15 deg. Beyond, a Gaussian process returns its prior (the service
+        refuses such poses, `posedyn schedule` warns)."""
+        X = self.X_train_ * self.x_scale_ + self.x_mean_
+        lo, hi = X.min(axis=0), X.max(axis=0)
+        margin = np.maximum(0.25 * (hi - lo), np.array([15.0 if f.endswith("_deg") else 50.0 for f in self.features_]))
+        return {f: (float(a - m), float(b + m)) for f, a, b, m in zip(self.features_, lo, hi, margin)}
+
+    def outside_workspace(self, poses: PoseSet) -> list[str]:
+        """One line per pose feature outside `workspace_bounds` ('pose P: x_mm = 1000 outside
+        [1050, 1950]')."""
+        bounds, columns = self.workspace_bounds(), poses.numeric_columns()
+        return [f"pose {poses.pose_id[i]}: {f} = {float(columns[f][i]):g} outside [{lo:g}, {hi:g}]"
+                for i in range(len(poses)) for f, (lo, hi) in bounds.items() if f in columns and not lo <= float(columns[f][i]) <= hi]
+
     def predict_table(self, poses: PoseSet) -> ModalTable:
         """Predictions as a modal table (std_* columns hold the predictive std)."""
         mean, std = self.predict(poses, return_std=True)

@@ -98,11 +98,20 @@ def modal_input_for(model_dir: Optional[Path], modes: Optional[Path], poses, dis
         table = table.select_poses([table.poses.index(p) for p in pose_set.pose_id])
         return table, distributions_from_table(table) if distributions else None
     model = load_model(model_dir)
+    warn_outside_workspace(model, pose_set)
     try:
         table = model.predict_table(pose_set)
     except InputError as exc:
         raise exc.located(file=None if isinstance(poses, PoseSet) else str(poses)) from None
     return table, model.predict_distributions(pose_set, table) if distributions else None
+
+
+def warn_outside_workspace(model, pose_set: PoseSet) -> None:
+    """The poses `posedyn serve` would refuse (outside the model's workspace), said on stderr (a
+    command's --json output stays strict JSON)."""
+    for line in model.outside_workspace(pose_set):
+        print(f"warning: {line}, the model's workspace (its training range widened by a quarter): a Gaussian process this far "
+              "from its data returns its prior, and `posedyn serve` refuses the pose (outside_workspace)", file=sys.stderr)
 
 
 def twin_modes_at(twin: Path, poses: PoseSet, poses_file: Path) -> list[PoseModes]:

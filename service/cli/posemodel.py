@@ -17,7 +17,7 @@ from posedyn.io.model_dir import check_model_target, load_model, save_model
 from posedyn.io.twin_file import load_twin
 from posedyn.posemodel import PoseModel, cross_validate
 from posedyn.posemodel import r2_score, table_targets
-from service.cli.common import console, output_file, print_json
+from service.cli.common import console, output_file, print_json, warn_outside_workspace
 
 
 class Method(str, Enum):
@@ -97,6 +97,7 @@ def predict(
     output_file(out, "--out")
     model = load_model(model_dir)
     pose_set = read_pose_table(poses)
+    warn_outside_workspace(model, pose_set)
     try:
         table = model.predict_table(pose_set)
     except InputError as exc:

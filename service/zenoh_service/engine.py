@@ -58,11 +58,7 @@ class ScheduleEngine:
         self.robot = self.model.twin[0] if self.model.twin is not None else None
         if self.robot is None:  # the one rule: the model's twin, else the given one, else the shipped twin
             self.robot, _ = load_twin(twin)
-        X = self.model.X_train_ * self.model.x_scale_ + self.model.x_mean_
-        lo, hi = X.min(axis=0), X.max(axis=0)
-        floor = np.array([15.0 if f.endswith("_deg") else 50.0 for f in self.model.features_])
-        margin = np.maximum(0.25 * (hi - lo), floor)
-        self.bounds = {f: (float(a - m), float(b + m)) for f, a, b, m in zip(self.model.features_, lo, hi, margin)}
+        self.bounds = self.model.workspace_bounds()
         self._lock = threading.Lock()  # Pinocchio's scratch data is not shared between threads
 
     def entry(self, pose: dict, cut: dict) -> dict:
