@@ -115,14 +115,14 @@ def fitted_frfs(frf, found) -> dict:
             for name, params in found.items()}
 
 
-def fit_misses(frfs, fits, fmin_hz=None, fmax_hz=None) -> list[str]:
-    """One line for every FRF whose fit misses the measurement by more than FIT_MISS of its peak
-    somewhere in the band (where, and what to try)."""
+def fit_misses(frfs, fitted, fmin_hz=None, fmax_hz=None) -> list[str]:
+    """One line for every FRF whose fit (`fitted`: each pose's `fitted_frfs`) misses the
+    measurement by more than FIT_MISS of its peak somewhere in the band (where, and what to try)."""
     out = []
-    for frf, found in zip(frfs, fits):
+    for frf, fits in zip(frfs, fitted):
         f = frf.frequency_hz
         band = (f >= (fmin_hz or -np.inf)) & (f <= (fmax_hz or np.inf))
-        for name, fit in fitted_frfs(frf, found).items():
+        for name, fit in fits.items():
             h = frf.frf[name]
             rel = np.where(band, np.abs(h - fit), 0.0) / np.abs(h[band]).max()
             k = int(np.argmax(rel))

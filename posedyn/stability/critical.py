@@ -65,7 +65,6 @@ class AbsoluteLimit:
 
     depth_m: float
     source: str  # "zoa" (the estimate) or "computed" (the lowest critical depth computed)
-    zoa_m: float
 
 
 def absolute_limit(dyn: ToolTipDynamics, cut: Cut, depths_m) -> AbsoluteLimit:
@@ -75,8 +74,8 @@ def absolute_limit(dyn: ToolTipDynamics, cut: Cut, depths_m) -> AbsoluteLimit:
     depths = np.asarray(depths_m, dtype=float).reshape(-1)
     depths = depths[np.isfinite(depths)]
     if len(depths) and depths.min() < estimate:
-        return AbsoluteLimit(float(depths.min()), "computed", estimate)
-    return AbsoluteLimit(estimate, "zoa", estimate)
+        return AbsoluteLimit(float(depths.min()), "computed")
+    return AbsoluteLimit(estimate, "zoa")
 
 
 def critical_points(structures: list[ToolTipDynamics], cut: Cut, rpm, steps: int | None = None, frequencies: bool = True, verify: bool = True,

@@ -780,7 +780,7 @@ def flip_islands(char, depth, tau, refine: bool = True, starts: bool = False):
     a = _flip_grid(depth, VERIFY_FRACTION)
     below, nearest = _flip_scan(char, a, tau)
     hit, near = _island_verdict(below, nearest)
-    inside = np.array([_first_rise(a[q], below[q], below[q, 0]) for q in range(len(depth))])
+    inside = np.array([_first_rise(a[q], below[q], below[q, 0]) for q in range(len(depth))]) if starts else None
     near_q, near_k = [], []
     for q in np.flatnonzero(~hit) if refine else ():
         for k in _approaches(nearest[q]):
@@ -794,15 +794,16 @@ def flip_islands(char, depth, tau, refine: bool = True, starts: bool = False):
         for i, (q, row) in enumerate(zip(near_q, b_fine)):
             if not hit[q] and np.any(row > below[q, 0]):
                 hit[q] = True
-                inside[q] = _first_rise(np.r_[lo[i], fine[i]], np.r_[below[q, 0], row], below[q, 0])
+                if starts:
+                    inside[q] = _first_rise(np.r_[lo[i], fine[i]], np.r_[below[q, 0], row], below[q, 0])
     return (hit, near, inside) if starts else (hit, near)
 
 
 def _first_rise(a: np.ndarray, below: np.ndarray, base) -> float:
     """The geometric middle of the first bracket of increasing depths a in which the number of
-    real multipliers below -1 rises above `base`; NaN where it never does."""
+    real multipliers below -1 rises above `base` (below[0]); NaN where it never does."""
     k = np.flatnonzero(below > base)
-    return float(np.sqrt(a[k[0] - 1] * a[k[0]])) if len(k) and k[0] > 0 else (float(a[0]) if len(k) else np.nan)
+    return float(np.sqrt(a[k[0] - 1] * a[k[0]])) if len(k) else np.nan
 
 
 def _island_verdict(below, nearest):
@@ -1974,13 +1975,10 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
             if found is not None:
                 hit[q], inside[q], at[q] = True, found[0], found[1]
         for q, j in zip(np.flatnonzero(hit), group[hit]):
-            if at[q] < _top_level(base):
+            # at the finest level too where the island's lower end is known (the redo estimates its
+            # error one level down), unless this is such a redo meeting the island again (hinted)
+            if at[q] < _top_level(base) or (np.isfinite(inside[q]) and hints is None):
                 solve_lower(j, base * 2.0 ** at[q], (inside[q], np.pi) if np.isfinite(inside[q]) else None)
-            elif np.isfinite(inside[q]) and hints is None:
-                # an island at the finest level: solved there from its lower end all the same (the
-                # redo estimates its error one level down); a redo that meets the island again
-                # (hinted) does not recurse
-                solve_lower(j, base * 2.0 ** at[q], (inside[q], np.pi))
             else:  # an island no finer model can be asked about: the answer is known to be too high
                 points[j] = dataclasses.replace(points[j], verified=False)
     # Hill's boundary points that reached none on the coarse cut model, below an answer at a finer

@@ -43,10 +43,11 @@ def fit(
     frfs = list(merged.values())
     table, fits = fit_table(frfs, fmin_hz, fmax_hz, max_order, modes)
     write_modal_table(table, out)
+    fitted = [fitted_frfs(frf, found) for frf, found in zip(frfs, fits)]  # for the plots and the check
     if plot is not None:
-        _plots(plot, frfs, fits, fmin_hz, fmax_hz, max_order)
+        _plots(plot, frfs, fitted, max_order)
     summary = table.summary()
-    warnings = fit_misses(frfs, fits, fmin_hz, fmax_hz)
+    warnings = fit_misses(frfs, fitted, fmin_hz, fmax_hz)
     if as_json:
         print_json({"out": str(out), "poses": summary["poses"], "modes": summary["modes"], "coupled": bool(table.cross), "warnings": warnings})
     else:
@@ -55,7 +56,7 @@ def fit(
             console.print(f"warning: {line}")
 
 
-def _plots(folder: Path, frfs, fits, fmin_hz, fmax_hz, max_order):
+def _plots(folder: Path, frfs, fitted, max_order):
     import matplotlib  # heavy (about 0.3 s): only when a figure is drawn
 
     matplotlib.use("Agg")
@@ -63,17 +64,13 @@ def _plots(folder: Path, frfs, fits, fmin_hz, fmax_hz, max_order):
 
 
     folder.mkdir(parents=True, exist_ok=True)
-    for frf, found in zip(frfs, fits):
+    for frf, fits in zip(frfs, fitted):
         f = frf.frequency_hz
         fig, axes = plt.subplots(2, 1, figsize=(9, 7), sharex=True)
         for name, h in sorted(frf.frf.items()):
             axes[0].semilogy(f, np.abs(h), lw=0.8, label=f"{name} measured")
-        if "matrix" in found:
-            for name, h in found["matrix"][1].items():
-                axes[0].semilogy(f, np.abs(h), "--", lw=1, label=f"{name} fitted")
-        else:
-            for name, h in fitted_frfs(frf, found).items():
-                axes[0].semilogy(f, np.abs(h), "--", lw=1, label=f"{name} fitted")
+        for name, h in fits.items():
+            axes[0].semilogy(f, np.abs(h), "--", lw=1, label=f"{name} fitted")
         axes[0].set_ylabel("|H| (m/N)")
         axes[0].legend(fontsize=7)
         name = next(iter(sorted(frf.frf)))
