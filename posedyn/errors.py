@@ -47,7 +47,7 @@ class InputError(ValueError):
             where.append(f"column '{self.column}'")
         text = f"expected {self.expected}"
         if self.got is not None:
-            text += f", got {self.got!r}"
+            text += f", got {_plain(self.got)!r}"
         return (", ".join(where) + ": " if where else "") + text
 
     def located(self, **where: Any) -> "InputError":
@@ -57,6 +57,17 @@ class InputError(ValueError):
             if fields.get(key) is None:
                 fields[key] = value
         return InputError(self.expected, got=self.got, **fields)
+
+
+def _plain(value: Any) -> Any:
+    """A value as the user wrote it: numpy scalars (and those inside tuples and lists) as Python
+    numbers, so a message reads "got -1.3", not "got np.float64(-1.3)"."""
+    if isinstance(value, (tuple, list)):
+        return type(value)(_plain(v) for v in value)
+    item = getattr(value, "item", None)
+    if callable(item) and getattr(value, "shape", None) == ():
+        return item()
+    return value
 
 
 def check_finite(name: str, value: float) -> float:

@@ -51,3 +51,36 @@ def test_data_summary_covers_every_shipped_file(datasets):
 def test_version_and_module_entry_point():
     result = posedyn("--version")
     assert result.returncode == 0 and result.stdout.startswith("posedyn ")
+
+
+def test_data_summary_checks_every_file_and_names_each_bad_one(tmp_path, datasets):
+    """One bad file does not hide the next: every file is checked, each bad one is named on stderr
+    (file, row, column), the good ones are still summarised, and the exit code is 2."""
+    good = (datasets / "seeds/hou2023_positions.csv").read_text().splitlines()
+    (tmp_path / "a_good.csv").write_text("\n".join(good) + "\n")
+    broken = list(good)
+    broken[2] = broken[2].replace("18.125", "fast")
+    (tmp_path / "b_broken.csv").write_text("\n".join(broken) + "\n")
+    (tmp_path / "c_no_meta.toml").write_text("[cut]\nteeth = 3\n")
+    (tmp_path / "d_latin1.csv").write_bytes("pose_id,direction\nP\xe9,x\n".encode("latin-1"))
+    result = posedyn("data", "summary", tmp_path, "--json")
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    report = {item["file"]: item for item in json.loads(result.stdout)}
+    assert report[str(tmp_path / "a_good.csv")]["kind"] == "modal_table"
+    assert [item["kind"] for item in report.values()] == ["modal_table", "invalid", "invalid", "invalid"]
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 3 and all(line.startswith("error: ") for line in lines)
+    assert lines[0].startswith(f"error: {tmp_path / 'b_broken.csv'}, row 2 (line 3), column 'fn_hz'")
+    assert str(tmp_path / "c_no_meta.toml") in lines[1] and str(tmp_path / "d_latin1.csv") in lines[2]
+    text = posedyn("data", "summary", tmp_path)
+    assert text.returncode == 2 and "1 of 4 files" in text.stdout
+
+
+def test_an_error_shows_numpy_numbers_as_the_user_wrote_them():
+    import numpy as np
+
+    from posedyn.errors import InputError
+
+    message = str(InputError("std > 0", got=np.float64(-1.3), row=1, column="std"))
+    assert message.endswith("expected std > 0, got -1.3")
+    assert str(InputError("x", got=(np.str_("x"), np.int64(3)))).endswith("got ('x', 3)")

@@ -225,3 +225,19 @@ def test_gap_writes_the_cut_with_the_named_cutting_and_tool_effects(tmp_path):
     cut, nominal = read_cut(written)[0], read_cut(cut_file)[0]
     assert cut.kt_pa == pytest.approx(1.25 * nominal.kt_pa, rel=1e-12) and cut.kn_pa == pytest.approx(1.25 * nominal.kn_pa, rel=1e-12)
     assert read_sle_cut(written)[1] == 0.0
+
+
+def test_a_bad_campaign_row_is_named_by_file_and_line(tmp_path):
+    """A row the baseline refuses (up_milling 0.5) is named by the campaign file, its row and line
+    and the column, as the reader's own errors are; and a number reads as written (-1.3, not
+    np.float64(-1.3))."""
+    header = "pose_id,x_mm,y_mm,z_mm,beta_deg,quantity,direction,mode,value,std,rpm,teeth,tool_diameter_mm,radial_depth_mm,axial_depth_mm,feed_per_tooth_mm,up_milling"
+    row = "front,1450.0,-150.0,600.0,-30.0,sle_um,x,,17.651,{std},3000.0,4,12.7,1.0,2.0,0.15,{up}"
+    cut = ROOT / "datasets/cuts/sweep_demo_cut.toml"
+    campaign = tmp_path / "walls.csv"
+    for std, up, expected in (("1.3", "0.5", "row 2 (line 3), column 'up_milling': expected up_milling 0 (down milling) or 1 (up milling), got 0.5"),
+                              ("-1.3", "0", "row 2 (line 3), column 'std': expected std > 0, got -1.3")):
+        campaign.write_text("\n".join([header, row.format(std="1.3", up="0"), row.format(std=std, up=up)]) + "\n")
+        done = run_cli("gap", "--measured", campaign, "--twin", "--cut", cut, "--out", tmp_path / "gap")
+        assert done.returncode == 2 and done.stderr.strip() == f"error: {campaign}, {expected}"
+        assert not (tmp_path / "gap").exists()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -67,22 +68,43 @@ def data_summary(
     files = sorted(p for p in folder.rglob("*") if p.suffix in (".csv", ".toml"))
     if not files:
         raise InputError("at least one .csv or .toml file", got="none", file=str(folder))
-    report = []
+    report, errors = [], []
     for path in files:
-        if path.suffix == ".csv" and "quantity" in path.read_text(encoding="utf-8-sig").partition("\n")[0].split(","):
-            m = read_measurements(path)  # a measurement campaign for `posedyn gap` (README: Measurement campaigns)
-            quantities = {str(q): int(n) for q, n in zip(*np.unique(m.quantity, return_counts=True))}
-            report.append({"file": str(path), "kind": "measurement_campaign", "rows": len(m), "poses": len(set(m.pose_id)), "quantities": quantities})
-        elif path.suffix == ".csv":
-            report.append({"file": str(path), "kind": "modal_table", **read_modal_table(path).summary()})
-        else:
-            params = read_params(path)
-            values = {k: v for k, v in flatten(params).items() if not k.startswith("meta.")}
-            report.append({"file": str(path), "kind": params["meta"]["kind"], "source": params["meta"]["source"], "values": values})
+        try:
+            report.append(_file_summary(path))
+        except InputError as exc:  # every file is checked: one bad file does not hide the next
+            errors.append(str(exc.located(file=str(path))))
+            report.append({"file": str(path), "kind": "invalid", "error": errors[-1]})
     if as_json:
         print_json(report)
-        return
-    out.print(f"[bold]{len(files)} files under {folder}/ are valid[/bold]")
+    else:
+        _print_summary(folder, report, len(files) - len(errors))
+    for error in errors:
+        print(f"error: {error}", file=sys.stderr)
+    if errors:
+        raise typer.Exit(2)
+
+
+def _file_summary(path: Path) -> dict:
+    """One file's entry of `data summary` (InputError where it is not valid)."""
+    try:
+        header = path.read_text(encoding="utf-8-sig").partition("\n")[0]
+    except UnicodeDecodeError as exc:
+        raise InputError("a UTF-8 text file", got=f"byte {exc.object[exc.start]:#04x} at offset {exc.start}", file=str(path)) from None
+    if path.suffix == ".csv" and "quantity" in header.split(","):
+        m = read_measurements(path)  # a measurement campaign for `posedyn gap` (README: Measurement campaigns)
+        quantities = {str(q): int(n) for q, n in zip(*np.unique(m.quantity, return_counts=True))}
+        return {"file": str(path), "kind": "measurement_campaign", "rows": len(m), "poses": len(set(m.pose_id)), "quantities": quantities}
+    if path.suffix == ".csv":
+        return {"file": str(path), "kind": "modal_table", **read_modal_table(path).summary()}
+    params = read_params(path)
+    values = {k: v for k, v in flatten(params).items() if not k.startswith("meta.")}
+    return {"file": str(path), "kind": params["meta"]["kind"], "source": params["meta"]["source"], "values": values}
+
+
+def _print_summary(folder: Path, report: list, valid: int) -> None:
+    """`data summary` as tables (the invalid files are said on stderr)."""
+    out.print(f"[bold]{valid} of {len(report)} files under {folder}/ are valid[/bold]")
     tables = {item["file"]: item for item in report if item["kind"] == "modal_table"}
     if tables:
         out.print(_modal_summary_table("Modal-test tables (one row per pose x direction x mode)", tables))
@@ -90,7 +112,7 @@ def data_summary(
         if item["kind"] == "measurement_campaign":
             out.print(f"{item['file']} (measurement campaign): {item['rows']} rows at {item['poses']} poses, "
                       + ", ".join(f"{n} {q}" for q, n in item["quantities"].items()))
-        elif item["kind"] != "modal_table":
+        elif item["kind"] not in ("modal_table", "invalid"):
             table = Table(title=f"{item['file']} ({item['kind']})", caption=item["source"], title_justify="left")
             table.add_column("parameter")
             table.add_column("value", justify="right")

@@ -44,7 +44,12 @@ def gap(
     if cut is None and model is not None and (model / "cut.toml").exists():
         cut = resolve_cut(cut, model)  # the model's cut; without one, only critical_depth_mm and sle_um rows need --cut
     baseline = Baseline(twin_file=None if model else twin_file, model_dir=model, cut_file=cut, absorber_file=absorber)
-    y, m = baseline.predict(m)
+    try:
+        y, m = baseline.predict(m)
+    except InputError as exc:  # a campaign row's problem: name the campaign file and its line
+        if exc.row is None:
+            raise
+        raise exc.located(file=str(measured), line=exc.row + 1) from None
     result = analyse(m, y, library=baseline.library())
     doc = json_ready(result.to_json())
     out.mkdir(parents=True, exist_ok=True)
