@@ -22,22 +22,23 @@ SINGLE_DIRECTION = 0.01
 
 
 def _matrix_mode_rows(mode) -> list:
-    """[(direction, k_direct, k_cross or NaN)] of one common-pole mode (shapes L, R; residue
+    """[(direction, k_direct, k_cross or NaN, relative std of k_direct)] of one common-pole mode (shapes L, R; residue
     L_i R_j / w^2 = 1 / k_ij): one row where it lives in one direction only, two uncoupled rows
     where the cross terms' signs disagree (coupling within the noise: the format needs k_xy and
     k_yx of one sign), else the two coupled rows (rank one: k_yy = k_xy k_yx / k_xx exactly)."""
     w2 = (2 * math.pi * mode["fn_hz"]) ** 2
     (lx, ly), (rx, ry) = mode["shape_left"], mode["shape_right"]
+    rel_x, rel_y = mode.get("rel_std_k", (np.nan, np.nan))
     rxx, ryy = abs(lx * rx), abs(ly * ry)
     share_y = ryy / (rxx + ryy)
     if share_y < SINGLE_DIRECTION:
-        return [("x", w2 / (lx * rx), np.nan)]
+        return [("x", w2 / (lx * rx), np.nan, rel_x)]
     if share_y > 1.0 - SINGLE_DIRECTION:
-        return [("y", w2 / (ly * ry), np.nan)]
+        return [("y", w2 / (ly * ry), np.nan, rel_y)]
     k_xy, k_yx = w2 / (lx * ry), w2 / (ly * rx)
     if np.sign(k_xy) != np.sign(k_yx):
-        return [("x", w2 / (lx * rx), np.nan), ("y", w2 / (ly * ry), np.nan)]
-    return [("x", w2 / (lx * rx), k_xy), ("y", w2 / (ly * ry), k_yx)]
+        return [("x", w2 / (lx * rx), np.nan, rel_x), ("y", w2 / (ly * ry), np.nan, rel_y)]
+    return [("x", w2 / (lx * rx), k_xy, rel_x), ("y", w2 / (ly * ry), k_yx, rel_y)]
 
 
 def fit_table(frfs, fmin_hz=None, fmax_hz=None, max_order: int = 40, modes: Optional[int] = None):
@@ -55,15 +56,16 @@ def fit_table(frfs, fmin_hz=None, fmax_hz=None, max_order: int = 40, modes: Opti
             coupled = coupled[:modes] if modes else coupled
             has_cross = True
             for m, mode in enumerate(coupled, 1):
-                for d, k_direct, k_cross in _matrix_mode_rows(mode):
+                for d, k_direct, k_cross, rel_std_k in _matrix_mode_rows(mode):
                     rows["pose_index"].append(p)
                     rows["direction"].append(d)
                     rows["mode"].append(m)
                     rows["fn_hz"].append(mode["fn_hz"])
                     rows["zeta"].append(mode["zeta"])
                     rows["k_n_per_m"].append(abs(k_direct))
-                    for key in std:
-                        std[key].append(np.nan)
+                    std["std_fn_hz"].append(mode.get("std_fn_hz", np.nan))
+                    std["std_zeta"].append(mode.get("std_zeta", np.nan))
+                    std["std_k_n_per_m"].append(abs(k_direct) * rel_std_k)
                     cross["k_xy_n_per_m"].append(k_cross if d == "x" else np.nan)
                     cross["k_yx_n_per_m"].append(k_cross if d == "y" else np.nan)
             found["matrix"] = (coupled, rebuilt)

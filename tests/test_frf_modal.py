@@ -82,6 +82,12 @@ def test_fit_cli_writes_a_coupled_table_that_the_stability_engine_uses(tmp_path)
     assert (tmp_path / "plots/C1.png").read_bytes()[:4] == b"\x89PNG"
     table = read_modal_table(tmp_path / "modes.csv")
     assert set(table.cross) == {"k_xy_n_per_m", "k_yx_n_per_m"}
+    # every row has its stds (the matrix path too): fn's and zeta's of the pole, k's of its direct residue
+    assert set(table.std) == {"std_fn_hz", "std_zeta", "std_k_n_per_m"}
+    for name in table.std:
+        assert np.all(np.isfinite(table.std[name]) & (table.std[name] >= 0)), name
+    assert np.all(table.std["std_k_n_per_m"] > 0) and np.all(table.std["std_k_n_per_m"] < 0.05 * table.k_n_per_m)
+    assert np.all(table.std["std_fn_hz"] < 0.01 * table.fn_hz)
     dyn = ToolTipDynamics.from_table(table, "C1")
     truth = ToolTipDynamics(fn_hz=[m[0] for m in modes[:2]], zeta=[m[1] for m in modes[:2]], shapes=np.array([m[2] for m in modes[:2]]).T, shapes_force=np.array([m[3] for m in modes[:2]]).T)
     omega = 2 * np.pi * np.linspace(5, 30, 200)

@@ -27,7 +27,7 @@ def fit(
     plot: Optional[Path] = typer.Option(None, "--plot", help="Folder for stabilization diagrams and measured-versus-fitted FRF plots."),
     as_json: bool = typer.Option(False, "--json"),
 ):
-    """Identify modes (fn, zeta, k; their std from direct FRFs; cross-coupling, without std, from an x-y FRF matrix) and write a modal table."""
+    """Identify modes (fn, zeta, k with their stds; the cross-coupling, without std, from an x-y FRF matrix) and write a modal table."""
     output_file(out, "--out")
     if plot is not None and plot.exists() and not plot.is_dir():
         raise InputError("a folder for the plots", got="an existing file", file=str(plot), column="--plot")
