@@ -165,3 +165,23 @@ def test_a_count_whose_monodromy_overflows_is_unresolved_without_a_warning(monke
         count, resolved, _ = floquet.unstable_count(char, 1e6, tau)
     assert not resolved
     assert len(sampled) == 1 and sampled[0] <= 2 * floquet.VERIFY_POINTS  # the first grid only
+
+
+def test_a_count_beyond_double_precision_is_unresolved_without_direct_samples(monkeypatch):
+    """Where M's entries pass MONODROMY_LIMIT (finite, no overflow) the LU of I - nu M cannot see
+    the factors near the circle: the count is not resolved, and no monodromy is sampled directly
+    (before: 13 and 22 s of direct samples for counts of 67 and -30 at 0.1 and 0.5 m on the
+    issue-17 structure; on a 300 rpm, one-tooth structure 60-80 s a count inside a repair's
+    bisection). Below the limit (20 mm, |M| ~ 1e8) the count is taken as before."""
+    from test_stability_multiscale import CUT, TABLE, structure
+
+    char = floquet.FloquetCharacteristic(structure(TABLE), CUT, 8.0)
+    tau = float(CUT.tooth_period_s(2000.0))
+    sampled = []
+    monodromy = char.monodromy
+    monkeypatch.setattr(char, "monodromy", lambda c, t: sampled.append(len(c)) or monodromy(c, t))
+    for depth in (0.1, 0.5):
+        count, resolved, theta = floquet.unstable_count(char, depth, tau)
+        assert (count, resolved) == (0, False) and np.isnan(theta) and not sampled
+    count, resolved, _ = floquet.unstable_count(char, 0.02, tau)
+    assert resolved and count > 0

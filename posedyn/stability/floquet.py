@@ -252,6 +252,13 @@ INTERP_SAFE = 0.5
 SEGMENT_BLOCK_BYTES = 1 << 27
 #: The winding count is taken at this fraction of the reported depth.
 VERIFY_FRACTION = 0.995
+#: Largest |M| entry at which the winding count is taken: the LU of I - nu M has a backward error
+#: of about 2n eps |M| (7e-5 at this limit), and the factors 1 - nu sigma near the circle that
+#: decide the count drown in it beyond (an entry of 1e58, 18 mm on a 300 rpm, one-tooth, 9 kHz
+#: structure whose answer is 3.25 mm: 60-80 s of direct samples a count, and counts of -46 and
+#: -42). There the count is not resolved (the bisection then takes the depth as unstable, a
+#: verification fails), without samples.
+MONODROMY_LIMIT = 1e10
 #: Frequency grid: half-width around each mode in units of zeta w, and points per w_T.
 BAND_ZETAS = 8.0
 POINTS_PER_TOOTH_FREQUENCY = 10
@@ -1372,23 +1379,28 @@ def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int
     (I - nu M)^-1 dM is below ln 2, |h_interpolated / h - 1| < 1, and both have the same zeros
     in the disk: Rouche). M's roots of unity double (INTERP_NODES, products only) until its
     polynomial converges; the segments' roots double (SUBSTEP_NODES) where a sample fails the
-    check; after that the count samples M directly. `polynomial` (a list): the interpolant the
+    check (M's then from the number its polynomial converged with); after that the count samples
+    M directly. `polynomial` (a list): the interpolant the
     count used, (Taylor coefficients in nu, Frobenius bound of its error on |nu| <= 1), is
     appended to it (`ladder_islands` reuses it below a). `direct` False: no direct samples where
-    the interpolants fail (then (0, False, NaN): not resolved)."""
+    the interpolants fail (then (0, False, NaN): not resolved). Where M has an entry above
+    MONODROMY_LIMIT: (0, False, NaN)."""
     th = _count_thetas(char, tau, VERIFY_POINTS if start is None else start, extra)
-    m, E = SUBSTEP_NODES[0], None
+    m, E, converged_at = SUBSTEP_NODES[0], None, INTERP_NODES[0]
     while m <= SUBSTEP_NODES[1]:
         E = segment_samples(char, a, tau, m, E)
         segments = segment_interpolants(E, m)
         m *= 2
-        N = INTERP_NODES[0]
+        N = converged_at  # M is the same function: from the roots its polynomial converged with before
         while segments is not None and N <= INTERP_NODES[1]:
             half, product_bound = circle_monodromies(*segments, N)
+            if not np.abs(half).max() <= MONODROMY_LIMIT:  # no count in double precision at this depth (nor directly)
+                return 0, False, np.nan
             coef, bound = monodromy_polynomial(half, N)
             if not np.isfinite(bound):  # M's polynomial needs more roots (products only)
                 N *= 2
                 continue
+            converged_at = N
             try:
                 out = _winding(functools.partial(_interpolated_sample, coef, bound + product_bound), th, max_points)
             except _Unsafe:  # the segments' interpolants are not accurate enough: more roots
@@ -1396,16 +1408,31 @@ def unstable_count(char: FloquetCharacteristic, a: float, tau: float, start: int
             if polynomial is not None:
                 polynomial.append((coef, bound + product_bound))
             return out
-    if not direct:
+    if not direct or not _node_monodromy_size(E) <= MONODROMY_LIMIT:  # (the segments' samples give M at their nodes)
         return 0, False, np.nan
 
     def sample_directly(t):
         with np.errstate(all="ignore"):  # an overflowing M (depths far past every boundary): no count (`_winding`)
             M = char.monodromy(a * (1.0 - np.exp(-1j * t)), np.full(len(t), tau))
+            if not np.abs(M).max() <= MONODROMY_LIMIT:
+                raise _Unsafe
             sign, logdet = np.linalg.slogdet(np.eye(M.shape[-1]) - np.exp(-1j * t)[:, None, None] * M)
         return np.angle(sign), logdet
 
-    return _winding(sample_directly, th, max_points)
+    try:
+        return _winding(sample_directly, th, max_points)
+    except _Unsafe:
+        return 0, False, np.nan
+
+
+def _node_monodromy_size(E: np.ndarray) -> float:
+    """The largest |M| entry at the nodes of `segment_samples` E (segments, nodes, 2n, 2n): the
+    product of the segments' exponentials at each node (exact samples, no interpolant)."""
+    with np.errstate(all="ignore"):
+        M = E[0]
+        for i in range(1, len(E)):
+            M = E[i] @ M
+        return float(np.abs(M).max())
 
 
 def _count_thetas(char, tau: float, points: int, extra=()) -> np.ndarray:
