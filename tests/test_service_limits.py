@@ -205,10 +205,10 @@ def test_memory_stays_flat_over_100000_queries_with_unique_pose_ids(model_dir, t
 
 def _stored_plan(model_dir: Path, state: Path, plan_id: str, model_version: str | None = None) -> dict:
     """A plan file as the service writes it (entries abridged to what the schema checks)."""
-    from posedyn.io.model_dir import load_model
     from service.zenoh_service.state import SCHEMA_VERSION
+    from service.zenoh_service.workers import EngineSpec
 
-    version = model_version or load_model(model_dir).training_hash_
+    version = model_version or EngineSpec(model_dir, CUT).model_version()  # what `serve` (tests.zenoh_helpers) serves
     doc = {"schema_version": SCHEMA_VERSION, "plan_id": plan_id, "model_version": version, "service_id": "f" * 32, "published_at": "2026-12-01T00:00:00.000+00:00",
            "cut": {}, "poses": [P5], "entries": [{"pose_id": "P5", "critical_depth_mm": 123.0, "model_version": version}]}
     (state / "plans").mkdir(parents=True, exist_ok=True)
@@ -257,12 +257,12 @@ def test_a_state_folder_it_cannot_use_stops_the_service_with_an_error(model_dir,
 def test_plans_of_another_model_are_recomputed_not_republished_as_current(model_dir, tmp_path):
     """Item 2: after a restart with another model, a stored plan is published again only once it
     is recomputed with the serving model."""
-    from posedyn.io.model_dir import load_model
+    from service.zenoh_service.workers import EngineSpec
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     state = tmp_path / "state"
     _stored_plan(model_dir, state, "good", model_version="0" * 64)
-    current = load_model(model_dir).training_hash_
+    current = EngineSpec(model_dir, CUT).model_version()
     proc = serve(model_dir, state, endpoint, cell="models")
     try:
         got = late_subscriber(endpoint, "cells/models/posedyn/schedules/good", wait_s=30)
@@ -274,6 +274,29 @@ def test_plans_of_another_model_are_recomputed_not_republished_as_current(model_
     assert entry["model_version"] == current and entry["critical_depth_mm"] != 123.0 and entry["critical_depth_mm"] > 0
     assert "recomputing" in err
     assert json.loads((state / "plans" / "good.json").read_text())["model_version"] == current
+
+
+def test_the_model_version_names_the_settings_files_a_plan_was_computed_with(model_dir, tmp_path):
+    """A plan stored without cut overrides is the default cut's: restarted on another cut (or
+    absorber, actuator, twin file), the service's version differs, so the plan is recomputed
+    (as a plan of another model is, above), not republished (a new user's 2000 rpm plan came
+    back unchanged from a service restarted on a 200 rpm cut)."""
+    from dataclasses import replace
+
+    from posedyn.io.model_dir import load_model
+    from service.zenoh_service.workers import EngineSpec
+
+    spec = EngineSpec(model_dir, CUT)
+    slow = tmp_path / "cut200.toml"
+    slow.write_text(CUT.read_text().replace("2000", "200"))
+    assert slow.read_text() != CUT.read_text()
+    version = spec.model_version()
+    assert version.startswith(load_model(model_dir).training_hash_ + "+settings")
+    assert EngineSpec(model_dir, CUT).model_version() == version  # the same files: the same version
+    for other in (replace(spec, cut=slow), replace(spec, absorber=ROOT / "datasets/seeds/hou2023_mrf_absorber.toml"),
+                  replace(spec, actuator=ROOT / "datasets/seeds/sahu2024_active_damping.toml"), replace(spec, twin=ROOT / "datasets/robots/kr_r2700_twin.toml")):
+        assert other.model_version() != version
+    assert spec.build().model_version == version  # the workers' engines say the same
 
 
 def test_state_writes_are_durable_fsync_of_the_file_and_its_folder(tmp_path, monkeypatch):

@@ -25,13 +25,20 @@ from posedyn.tool_change import tool_changed_table
 from service.zenoh_service.protocol import RequestError
 
 
-def model_version(training_hash: str, robust_samples: int = 0, tools: tuple[Path, Path] | None = None, pivot_mm: float = 150.0) -> str:
-    """What the published entries depend on besides the cut: the model, the robust sampling and
-    a tool change (plans kept from a run with other settings are recomputed, not republished)."""
+def model_version(training_hash: str, robust_samples: int = 0, tools: tuple[Path, Path] | None = None, pivot_mm: float = 150.0,
+                  settings: tuple[Path | None, ...] = ()) -> str:
+    """What the published entries depend on besides a request's cut overrides: the model, the
+    robust sampling, a tool change and the `settings` files the service was started with (its
+    default cut, absorber, actuator and twin; None: not given). Plans kept from a run with other
+    settings are recomputed, not republished: a plan sent without cut overrides on the 2000 rpm
+    cut was republished unchanged after a restart on a 200 rpm cut."""
     version = training_hash if not robust_samples else f"{training_hash}+robust{robust_samples}"
     if tools is not None:
         digest = hashlib.sha256(b"".join(Path(p).read_bytes() for p in tools) + repr(float(pivot_mm)).encode()).hexdigest()[:12]
         version += f"+tool{digest}"
+    if settings:
+        digest = hashlib.sha256(b"\0".join(b"-" if p is None else Path(p).read_bytes() for p in settings)).hexdigest()[:12]
+        version += f"+settings{digest}"
     return version
 
 
@@ -50,7 +57,7 @@ class ScheduleEngine:
         self.tools = None if tools is None else (read_tool(tools[0]), read_tool(tools[1]), pivot_mm * 1e-3)
         if self.tools is not None and robust_samples:
             raise InputError("robust samples without a tool change (the coupled modes carry no predictive distribution yet)", got="both", column="robust_samples")
-        self.model_version = model_version(self.model.training_hash_, robust_samples, tools, pivot_mm)
+        self.model_version = model_version(self.model.training_hash_, robust_samples, tools, pivot_mm, (cut, absorber, actuator, twin))
         self.cut, self.rpm, self.steps = read_cut(cut)
         self.absorber = read_absorber(absorber)
         self.drive = read_drive(absorber)

@@ -42,7 +42,7 @@ class EngineSpec:
         return ScheduleEngine(self.model_dir, self.cut, self.absorber, self.actuator, self.twin, self.robust_samples, self.tools, self.pivot_mm)
 
     def model_version(self) -> str:
-        return model_version(load_model(self.model_dir).training_hash_, self.robust_samples, self.tools, self.pivot_mm)
+        return model_version(load_model(self.model_dir).training_hash_, self.robust_samples, self.tools, self.pivot_mm, (self.cut, self.absorber, self.actuator, self.twin))
 
 
 _engine: ScheduleEngine | None = None
