@@ -33,8 +33,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from absorber.tuning import min_real_part, tune_sims
-from posedyn.errors import InputError, check_positive
+from absorber.tuning import LAYOUTS, min_real_part, tune_sims
+from posedyn.errors import InputError, check_choice, check_non_negative, check_positive
 from posedyn.robot import pose_rotation
 
 if TYPE_CHECKING:
@@ -69,6 +69,7 @@ class Actuator:
     def __post_init__(self):
         for name in ("transducer_n_per_v", "zeta", "fn_horizontal_hz", "fn_vertical_hz", "force_limit_n"):
             check_positive(name, getattr(self, name))
+        check_non_negative("delay_s", self.delay_s)
 
     def fn_hz(self, angle_to_gravity_rad: float) -> float:
         """w(theta)^2 = w_h^2 + (w_v^2 - w_h^2) |cos theta| (see the module docstring)."""
@@ -248,7 +249,8 @@ def gain_schedule(loop: DVF, fn_hz: float, disturbance_n: float, margin_db: floa
     poles with a Pade delay, the independent check in the tests)."""
     k_max = loop.nyquist_gain_limit() if loop.open_loop_stable() else 0.0
     if not math.isfinite(k_max) or k_max <= 0:
-        raise InputError("a loop that is stable at small gains and loses stability at some finite gain", got=k_max, column="gain")
+        raise InputError(f"a velocity-feedback loop at {fn_hz:.4g} Hz that is stable at small gains and loses stability at some finite gain "
+                         "(the actuator's delay_ms, fn_hz and zeta decide it)", got=k_max, column="gain")
     cap = k_max / 10 ** (margin_db / 20)
     gains = np.linspace(cap / 40, cap, 40)
     forces = loop.max_force_n(gains, disturbance_n)
@@ -285,6 +287,13 @@ class ControlConfig:
     margin_db: float = 6.0
     virtual_layout: str = "idva-c3"
     virtual_mass_ratio: float = 0.0055
+
+    def __post_init__(self):
+        check_choice("mount_axis", self.mount_axis, ("x", "y", "z"))
+        check_positive("disturbance_n", self.disturbance_n)
+        check_non_negative("margin_db", self.margin_db)
+        check_choice("virtual_layout", self.virtual_layout, LAYOUTS)
+        check_positive("virtual_mass_ratio", self.virtual_mass_ratio)
 
 
 def actuator_angle_to_gravity(tool_rotation: np.ndarray, mount_axis: str = "y") -> float:

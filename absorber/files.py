@@ -19,7 +19,7 @@ from absorber.coil_dynamics import CoilDrive
 from absorber.mrf import MRFAbsorber
 from absorber.robust import HostUncertainty
 from absorber.tuning import Host, known_tunings, remember_tunings
-from posedyn.errors import InputError, check_positive
+from posedyn.errors import InputError, check_non_negative, check_positive
 from posedyn.io.atomic import write_text_atomic
 from posedyn.io.params import read_params, reading
 from posedyn.stability.cutting import Cut
@@ -64,6 +64,7 @@ def read_actuator(path: str | os.PathLike | None) -> ControlConfig:
     p = read_params(path)
     with reading(path, "actuator file"):
         a = p["actuator"]
+        check_non_negative("actuator.horizontal.delay_ms", a["horizontal"]["delay_ms"])
         actuator = Actuator(
             transducer_n_per_v=a["horizontal"]["transducer_constant_n_per_v"],
             zeta=a["horizontal"]["zeta"],
@@ -73,7 +74,14 @@ def read_actuator(path: str | os.PathLike | None) -> ControlConfig:
             force_limit_n=a["force_limit_n"],
         )
         control = p.get("control", {})
-        return ControlConfig(actuator=actuator, **{k: control[k] for k in ("mount_axis", "disturbance_n", "margin_db", "virtual_layout", "virtual_mass_ratio") if k in control})
+        keys = ("mount_axis", "disturbance_n", "margin_db", "virtual_layout", "virtual_mass_ratio")
+        for key in control:
+            if key not in keys:
+                raise InputError("a [control] key among " + ", ".join(keys), got=key, column=f"control.{key}")
+        try:
+            return ControlConfig(actuator=actuator, **{k: control[k] for k in keys if k in control})
+        except InputError as exc:  # named as the file writes it
+            raise InputError(exc.expected, got=exc.got, column=f"control.{exc.column}") from None
 
 
 @dataclass(frozen=True)

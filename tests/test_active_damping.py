@@ -95,3 +95,55 @@ def test_control_schedule_cli(datasets, tmp_path):
     assert {"pose_id", "actuator_fn_hz", "dvf_gain_ns_per_m", "gain_margin_db", "dynamic_stiffness_gain_pct", "max_force_n", "virtual_absorber"} <= set(entry)
     assert entry["actuator_fn_hz"] == pytest.approx(9.0)
     assert entry["virtual_absorber"]["layout"] == "idva-c3" and entry["virtual_absorber"]["force_ok"]
+
+
+@pytest.mark.parametrize("line, column, expected", [
+    ('mount_axis = "diagonal"', "control.mount_axis", "one of x, y, z"),
+    ("disturbance_n = nan", "control.disturbance_n", "a finite number"),
+    ("margin_db = -6", "control.margin_db", "a number >= 0"),
+    ('virtual_layout = "tmdd"', "control.virtual_layout", "one of tmd"),
+    ("gain = 3", "control.gain", "a [control] key among"),
+])
+def test_a_bad_actuator_file_is_named_not_a_traceback_or_a_silent_default(datasets, tmp_path, line, column, expected):
+    """A new user's `mount_axis = "diagonal"` ended in `ValueError: substring not found` (and a
+    service that answered every query `internal`); NaN, a negative margin and a misspelt key
+    were taken (gain 0 with margin inf, or the default)."""
+    from absorber.files import read_actuator
+    from posedyn.errors import InputError
+
+    bad = tmp_path / "actuator.toml"
+    bad.write_text((datasets / "seeds/sahu2024_active_damping.toml").read_text() + f"\n[control]\n{line}\n")
+    with pytest.raises(InputError) as err:
+        read_actuator(bad)
+    assert err.value.file == str(bad) and err.value.column == column and err.value.expected.startswith(expected)
+    poses = tmp_path / "p5.csv"
+    poses.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nP5,1400,0,800,0\n")
+    done = run_cli("control", "schedule", "--modes", datasets / "seeds/hou2023_positions.csv", "--poses", poses, "--actuator", bad)
+    assert done.returncode == 2 and done.stderr.startswith(f"error: {bad}, column '{column}'") and done.stdout == ""
+    negative_delay = tmp_path / "delay.toml"
+    negative_delay.write_text((datasets / "seeds/sahu2024_active_damping.toml").read_text().replace("delay_ms = 0.6", "delay_ms = -0.6"))
+    with pytest.raises(InputError, match="delay_ms"):
+        read_actuator(negative_delay)
+
+
+def test_a_service_with_a_bad_settings_file_does_not_start(model_dir, datasets, tmp_path):
+    """The service reads its cut, absorber, actuator, twin and tool files before it starts (the
+    workers build their engines later): a bad one is the start's error, not every query's."""
+    pytest.importorskip("zenoh")
+    from posedyn.errors import InputError
+    from service.zenoh_service.server import ScheduleService, ServiceSettings
+    from service.zenoh_service.session import zenoh_config
+    from service.zenoh_service.workers import EngineSpec
+
+    bad = tmp_path / "actuator.toml"
+    bad.write_text((datasets / "seeds/sahu2024_active_damping.toml").read_text() + '\n[control]\nmount_axis = "diagonal"\n')
+    spec = EngineSpec(model_dir, datasets / "seeds/hou2023_cut.toml", actuator=bad)
+    from tests.zenoh_helpers import free_port
+
+    service = ScheduleService(spec, ServiceSettings("refused"), zenoh_config(None, "peer", [f"tcp/127.0.0.1:{free_port()}"]), tmp_path / "state")
+    try:
+        with pytest.raises(InputError, match="mount_axis"):
+            service.start()
+        assert service.session is None
+    finally:
+        service.close()

@@ -222,6 +222,7 @@ class ScheduleService:
     def start(self) -> "ScheduleService":
         """Load everything or nothing: on any failure the service is closed and the error raised."""
         try:
+            self.spec.check()
             self.model_version = self.spec.model_version()
             current, stale = self.store.open().load_all(self.model_version) if self.store else ([], [])
             self.pool.start()

@@ -17,10 +17,13 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 
-from absorber.files import load_tuning_cache, save_tuning_cache
+from absorber.files import load_tuning_cache, read_absorber, read_actuator, read_drive, save_tuning_cache
 from absorber.tuning import known_tunings
 from posedyn.io.json_values import json_ready
+from posedyn.io.cut import read_cut
 from posedyn.io.model_dir import load_model
+from posedyn.io.tool_file import read_tool
+from posedyn.io.twin_file import load_twin
 from service.zenoh_service.engine import ScheduleEngine, model_version
 from service.zenoh_service.protocol import RequestError
 
@@ -37,6 +40,19 @@ class EngineSpec:
     robust_samples: int = 0
     tools: tuple[Path, Path] | None = None  # (reference, target) tool files: schedules for the target tool
     pivot_mm: float = 150.0
+
+    def check(self) -> None:
+        """Every settings file read here, in the service's own process: a bad one stops the
+        service at its start with the file's error (in the workers alone it was every query's
+        `internal` error, the service up)."""
+        read_cut(self.cut)
+        read_absorber(self.absorber)
+        read_drive(self.absorber)
+        read_actuator(self.actuator)
+        if self.twin is not None:
+            load_twin(self.twin)
+        for tool in self.tools or ():
+            read_tool(tool)
 
     def build(self) -> ScheduleEngine:
         return ScheduleEngine(self.model_dir, self.cut, self.absorber, self.actuator, self.twin, self.robust_samples, self.tools, self.pivot_mm)
