@@ -185,6 +185,16 @@ def test_sweep_refuses_to_mix_runs(twin_sweep, grid):
     assert changed.returncode == 2 and "fingerprint" in changed.stderr
 
 
+def test_a_bad_input_file_writes_nothing(grid, tmp_path, datasets):
+    """Every input file is read before the output folder is made: a bad actuator file used to
+    leave sweep.json and an empty chunks/ behind (the next run then refused without --resume)."""
+    bad = tmp_path / "actuator.toml"
+    bad.write_text((datasets / "seeds/sahu2024_active_damping.toml").read_text() + '\n[control]\nmount_axis = "diagonal"\n')
+    done = run_cli("sweep", "--twin", TWIN, "--grid", grid, "--cut", CUT, "--actuator", bad, "--out", tmp_path / "sweep", "--workers", "1")
+    assert done.returncode == 2 and done.stderr.startswith(f"error: {bad}, column 'control.mount_axis'")
+    assert not (tmp_path / "sweep").exists()
+
+
 def test_sweep_with_a_trained_model_reports_uncertainty_and_equals_posedyn_schedule(tmp_path, grid):
     """The sweep and `posedyn schedule` run the one per-pose chain: the same model and poses give
     the same numbers to the last digit; `posedyn chatter` on the predicted modes agrees to 0.5 %."""

@@ -23,7 +23,7 @@ from pathlib import Path
 from posedyn.errors import InputError
 from posedyn.io.atomic import write_text_atomic
 from posedyn.table import PoseSet
-from service.sweep.chunk import compute_chunk, representative_lobes
+from service.sweep.chunk import compute_chunk, context, representative_lobes
 from service.sweep.spec import RESULT_COLUMNS, SweepSpec, read_sweep_poses
 import hashlib
 
@@ -63,6 +63,7 @@ def run_sweep(spec: SweepSpec, out: Path, workers: int | None = None, scheduler:
         "poses": len(poses),
         "chunks": len(chunks),
     }
+    context(spec.to_json(), grid_twin)  # every input file read before anything is written (a bad one left sweep.json and chunks/)
     _prepare(out, manifest, resume)
     done = {i for i in range(len(chunks)) if _chunk_path(chunk_dir, i).exists()}
     pending = [i for i in range(len(chunks)) if i not in done]
