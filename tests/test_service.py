@@ -196,7 +196,7 @@ def test_tls_works_and_a_client_without_the_certificate_is_refused(model_dir, tm
         proc.communicate(timeout=30)
 
 
-def test_query_reads_its_request_before_connecting_and_an_unreachable_service_is_no_reply():
+def test_query_reads_its_request_before_connecting_and_an_unreachable_service_is_no_reply(tmp_path):
     """A query to an endpoint where nothing listens exited 2 ('column --connect', as for bad
     input) although the README says no reply exits 3, and a malformed --pose-json was found only
     after connecting. The request is read first (exit 2 at once), and a session that reaches
@@ -206,6 +206,16 @@ def test_query_reads_its_request_before_connecting_and_an_unreachable_service_is
     nowhere = f"tcp/127.0.0.1:{free_port()}"
     bad = run_cli("query", "--cell", "c", "--connect", nowhere, "--pose-json", "{not json", "--timeout-s", "2")
     assert bad.returncode == 2 and "--pose-json" in bad.stderr
+    # NaN / Infinity (not JSON: the request could not be sent) and an empty plan were tracebacks
+    for option, text in (("--pose-json", json.dumps({**P5, "x_mm": float("nan")})), ("--pose-json", "[1, 2]")):
+        bad = run_cli("query", "--cell", "c", "--connect", nowhere, option, text, "--timeout-s", "2")
+        assert bad.returncode == 2 and bad.stderr.startswith(f"error: column '{option}': expected a JSON object"), bad.stderr
+    bad = run_cli("query", "--cell", "c", "--connect", nowhere, "--pose-json", json.dumps(P5), "--cut-json", '{"rpm": Infinity}', "--timeout-s", "2")
+    assert bad.returncode == 2 and "Infinity is not a JSON number" in bad.stderr
+    empty = tmp_path / "path.csv"
+    empty.write_text("")
+    bad = run_cli("query", "--cell", "c", "--connect", nowhere, "--plan", empty, "--timeout-s", "2")
+    assert bad.returncode == 2 and bad.stderr.startswith(f"error: {empty}: expected a CSV")
     unreachable = run_cli("query", "--cell", "c", "--connect", nowhere, "--pose-json", json.dumps(P5), "--timeout-s", "2")
     assert unreachable.returncode == 3 and "no_session" in unreachable.stderr and nowhere in unreachable.stderr
 

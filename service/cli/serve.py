@@ -118,7 +118,10 @@ def query(
     if pose_json is not None:
         pose = _json_option(pose_json, "--pose-json")
     else:
-        if "time_s" in plan.read_text(encoding="utf-8", errors="replace").splitlines()[0].split(","):
+        lines = plan.read_text(encoding="utf-8", errors="replace").splitlines()
+        if not lines:
+            raise InputError("a CSV with the pose columns and one row per pose", got="an empty file", file=str(plan))
+        if "time_s" in lines[0].split(","):
             path_poses, times = read_tool_path(plan)  # a timed path: the plan carries the coil's trajectory
             rows, times = path_poses.records(), times.tolist()
         else:
@@ -166,8 +169,16 @@ def _g(value) -> str:
     return "-" if value is None else f"{value:.4g}"
 
 
-def _json_option(text: str, option: str):
+def _json_option(text: str, option: str) -> dict:
+    """The JSON object an option holds (NaN and Infinity are not JSON: the request could not be sent)."""
+
+    def refuse(constant):
+        raise ValueError(f"{constant} is not a JSON number")
+
     try:
-        return json.loads(text)
+        value = json.loads(text, parse_constant=refuse)
     except ValueError as exc:
-        raise InputError("JSON", got=str(exc), column=option) from None
+        raise InputError("a JSON object", got=str(exc), column=option) from None
+    if not isinstance(value, dict):
+        raise InputError("a JSON object", got=text, column=option)
+    return value
