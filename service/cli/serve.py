@@ -59,11 +59,15 @@ def serve(
         if not path.exists():
             raise InputError("an existing file or directory", got="missing", file=str(path))
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    limits = dict(max_payload_bytes=max_payload_bytes, max_plan_payload_bytes=max_plan_payload_bytes, queue_size=queue_size, workers=workers,
+                  stale_after_s=stale_after_s, cache_entries=cache_entries, plans_in_memory=plans_in_memory, pending_plans=pending_plans, stored_plans=stored_plans)
     try:
-        settings = ServiceSettings(cell, max_payload_bytes, max_plan_payload_bytes, queue_size, workers, stale_after_s,
-                                   cache_entries=cache_entries, plans_in_memory=plans_in_memory, pending_plans=pending_plans, stored_plans=stored_plans)
-    except RequestError as exc:
-        raise InputError("a cell name of letters, digits, - or _", got=cell, column="--cell") from exc
+        settings = ServiceSettings(cell, **limits)
+    except RequestError as exc:  # named as the flag it came from
+        if exc.code == "invalid_cell":
+            raise InputError("a cell name of letters, digits, - or _", got=cell, column="--cell") from None
+        name = exc.message.partition(":")[0]
+        raise InputError("a finite number > 0", got=limits.get(name), column="--" + name.replace("_", "-")) from None
     key = read_key(signing_key) if signing_key else None
     if 0 < robust_samples < 8:
         raise InputError("--robust-samples 0 (off) or 8-2000", got=robust_samples, column="--robust-samples")

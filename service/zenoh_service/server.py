@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import heapq
 import json
+import math
 import logging
 import threading
 import time
@@ -85,8 +86,8 @@ class ServiceSettings:
             raise RequestError("invalid_cell", f"cell: expected letters, digits, - or _, got {self.cell!r}")
         for f in fields(self):
             value = getattr(self, f.name)
-            if f.name != "cell" and not (isinstance(value, (int, float)) and value > 0):
-                raise RequestError("invalid_setting", f"{f.name}: expected a positive number, got {value!r}")
+            if f.name != "cell" and not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise RequestError("invalid_setting", f"{f.name}: expected a finite number > 0, got {value!r}")
 
 
 class ReplyCache:
