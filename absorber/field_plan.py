@@ -176,6 +176,7 @@ class FieldPlanner:
             status, values = "not_converged", opti.debug.value
         seconds = time.perf_counter() - start
         X = np.atleast_2d(values(self.X))
+        X[:2] = np.where((X[:2] < 0.0) & (X[:2] > -1e-9), 0.0, X[:2])  # the field bound met within IPOPT's tolerance (-4e-42 T refused downstream)
         V = np.atleast_1d(values(self.V)).ravel()
         stats = opti.stats()
         return FieldPlan(

@@ -146,3 +146,18 @@ def test_schedule_cli_from_a_table_and_from_a_model(datasets, tmp_path):
     result = posedyn("schedule", tmp_path / "m", "--poses", poses, "--cut", datasets / "seeds/hou2023_cut.toml", "--policy", "sims", "--json")
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout)[0]["absorber"]["policy"] == "sims"
+
+
+def test_a_pose_asked_of_a_modal_table_must_be_where_the_table_has_it(datasets, tmp_path):
+    """`--modes` picks a table's poses by pose_id: a pose file's P5 at x = 1450 mm silently got
+    the table's P5 (x = 1400) in schedule, control schedule and tool-change. A pose whose
+    columns differ from the table's is an error naming the file, row and column."""
+    poses = tmp_path / "p5.csv"
+    poses.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nP3,1600,0,800,0\nP5,1450,0,800,0\n")
+    table = datasets / "seeds/hou2023_positions.csv"
+    for command in (["schedule", "--cut", datasets / "seeds/hou2023_cut.toml"], ["control", "schedule"]):
+        done = posedyn(*command, "--modes", table, "--poses", poses)
+        assert done.returncode == 2 and done.stderr.strip() == (
+            f"error: {poses}, row 2 (line 3), column 'x_mm': expected pose P5 where {table} has it, x_mm = 1400, got 1450.0")
+    poses.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nP3,1600,0,800,0\nP5,1400,0,800,0\n")
+    assert posedyn("control", "schedule", "--modes", table, "--poses", poses).returncode == 0

@@ -174,3 +174,24 @@ def test_a_cut_file_names_the_key_it_does_not_know(tmp_path, change, column):
     with pytest.raises(InputError) as err:
         read_cut(path)
     assert err.value.column == column and err.value.file == str(path)
+
+
+def test_the_cut_ranges_are_the_services_everywhere(datasets, tmp_path):
+    """A new user's cut file with kt_mpa = 7.96e8 (N/m^2 in the MPa key) gave a 5.7e-7 mm depth
+    from `schedule` and `chatter`, and `chatter --rpm 50 --teeth 40` ran, where the service
+    refuses all three. One set of ranges (posedyn.stability.cutting): the cut file, the flags and
+    the service's requests."""
+    from service.zenoh_service.protocol import RANGES
+
+    bad = tmp_path / "cut.toml"
+    bad.write_text((datasets / "seeds/hou2023_cut.toml").read_text().replace("kt_mpa = 796.0", "kt_mpa = 7.96e8"))
+    poses = tmp_path / "p5.csv"
+    poses.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nP5,1400,0,800,0\n")
+    done = run_cli("schedule", "--modes", datasets / "seeds/hou2023_positions.csv", "--poses", poses, "--cut", bad)
+    assert done.returncode == 2 and done.stderr.startswith(f"error: {bad}, column 'cut.kt_mpa': expected a tangential cutting coefficient up to 20 GPa, got 796000000")
+    base = ["chatter", "--modes", datasets / "seeds/hou2023_positions.csv", "--pose-id", "P5", "--kn-mpa", "169", "--radial-immersion", "0.5", "--milling", "down"]
+    for flags, flag in ((["--rpm", "50", "--teeth", "3", "--kt-mpa", "796"], "--rpm"), (["--rpm", "2000", "--teeth", "40", "--kt-mpa", "796"], "--teeth"),
+                        (["--rpm", "2000", "--teeth", "3", "--kt-mpa", "7.96e8"], "--kt-mpa")):
+        done = run_cli(*base, *flags)
+        assert done.returncode == 2 and done.stderr.startswith(f"error: column '{flag}'"), done.stderr
+    assert RANGES["rpm"][:2] == (100.0, 100_000.0) and RANGES["kt_mpa"][1] == 20_000.0

@@ -1,6 +1,8 @@
 """Coil-current trajectories along a tool path (issue 21): the planner against an independent
 re-simulation, transitions, a long hot cut, the depth along the path, warm starts."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -145,3 +147,20 @@ def test_plan_cli_with_the_twins_modes_across_the_seed_003_workspace(tmp_path, d
     assert depth["plan"] > 1.3 * depth["step_schedule"]
     both = run_cli(*args[:1], "--modes", str(path), *args[1:])
     assert both.returncode == 2 and "one mode source" in both.stderr
+
+
+def test_a_plan_the_solver_cannot_make_is_an_error_and_a_microsecond_path_is_a_plan(tmp_path, model_dir, datasets):
+    """A new user's two-point paths: 0 and 1e9 s made IPOPT stop unconverged, and `plan` exited 0,
+    wrote the last iterate (95 % off in re-simulation) and called it better than the steps; 0 and
+    1e-6 s failed on a field of -4.3e-42 T (IPOPT's bound tolerance). The first is exit 1 with
+    nothing written, the second a plan (the coil cannot follow in a microsecond: mistuned)."""
+    path = tmp_path / "path.csv"
+    path.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg,time_s\nA,1600,0,800,0,0\nB,1400,0,800,0,1e9\n")
+    cut = datasets / "seeds/hou2023_cut.toml"
+    done = run_cli("plan", model_dir, "--path", path, "--cut", cut, "--out", tmp_path / "huge")
+    assert done.returncode == 1 and "the coil planner did not converge" in done.stderr and not (tmp_path / "huge").exists()
+    path.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg,time_s\nA,1600,0,800,0,0\nB,1400,0,800,0,1e-6\n")
+    done = run_cli("plan", model_dir, "--path", path, "--cut", cut, "--out", tmp_path / "tiny", "--json")
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(done.stdout)
+    assert summary["solver"]["status"] == "solved" and summary["plan"]["max_mistune_pct"] > 30

@@ -378,3 +378,28 @@ def test_the_workspace_the_service_serves_is_the_models_and_schedule_warns_beyon
     (tmp_path / "poses.csv").write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nx1000,1000,0,800,0\n")
     result = run_cli("predict", tmp_path / "m", "--poses", tmp_path / "poses.csv", "--json")
     assert result.returncode == 0 and "outside_workspace" in result.stderr and "x1000" in result.stderr
+
+
+def test_a_pose_column_the_training_poses_all_share_bounds_the_workspace(datasets, tmp_path):
+    """Trained on seed 004's positions (x varies; y = 0, z = 800, beta = 0 throughout), a pose at
+    y = 300 mm, beta = 45 deg got exactly P5's prediction and its tight std, and the service
+    answered it: the model never saw y or beta change. Such a column bounds the workspace within
+    50 mm or 15 deg of its value, saved with the model; the service refuses beyond, schedule
+    warns, and a request that leaves the column out is not refused for it."""
+    from posedyn.table import PoseSet
+    from service.zenoh_service.engine import ScheduleEngine
+    from service.zenoh_service.protocol import RequestError
+
+    model = PoseModel("stgp").fit(read_modal_table(datasets / "seeds/hou2023_positions.csv"))
+    assert model.features_ == ["x_mm"] and model.fixed_pose_ == {"y_mm": 0.0, "z_mm": 800.0, "beta_deg": 0.0}
+    bounds = model.workspace_bounds()
+    assert bounds["y_mm"] == (-50.0, 50.0) and bounds["beta_deg"] == (-15.0, 15.0) and bounds["z_mm"] == (750.0, 850.0)
+    poses = PoseSet.from_columns(("P5", "Q"), {"x_mm": [1400.0, 1400.0], "y_mm": [0.0, 300.0], "z_mm": [800.0, 800.0], "beta_deg": [0.0, 45.0]})
+    assert model.outside_workspace(poses) == ["pose Q: y_mm = 300 outside [-50, 50]", "pose Q: beta_deg = 45 outside [-15, 15]"]
+    save_model(model, tmp_path / "m")
+    assert load_model(tmp_path / "m").workspace_bounds() == bounds
+    engine = ScheduleEngine(tmp_path / "m", datasets / "seeds/hou2023_cut.toml")
+    with pytest.raises(RequestError) as refused:
+        engine.pose_set({"pose_id": "Q", "x_mm": 1400.0, "y_mm": 300.0, "z_mm": 800.0, "beta_deg": 0.0})
+    assert refused.value.code == "outside_workspace" and "pose.y_mm" in refused.value.message
+    engine.pose_set({"pose_id": "P5", "x_mm": 1400.0, "y_mm": 20.0, "z_mm": 800.0, "a_deg": 0.0, "b_deg": 0.0, "c_deg": 0.0})  # no beta: not refused for it

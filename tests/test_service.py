@@ -60,7 +60,9 @@ def test_every_bad_input_gets_its_error_and_the_service_keeps_answering(client):
         b'{"pose": {"x_mm": NaN, "y_mm": 0, "z_mm": 800, "beta_deg": 0}}': "not_finite",
         b'{"pose": {"x_mm": 1e999, "y_mm": 0, "z_mm": 800, "beta_deg": 0}}': "not_finite",
         b'{"pose": {"x_mm": "far", "y_mm": 0, "z_mm": 800, "beta_deg": 0}}': "invalid_field",
-        b'{"pose": {"x_mm": 9000, "y_mm": 0, "z_mm": 800, "beta_deg": 0}}': "outside_workspace",
+        b'{"pose": {"x_mm": 9000, "y_mm": 0, "z_mm": 800, "beta_deg": 0}}': "unreachable_pose",  # out of reach first
+        b'{"pose": {"x_mm": 2100, "y_mm": 0, "z_mm": 800, "beta_deg": 0}}': "outside_workspace",
+        b'{"pose": {"x_mm": 1400, "y_mm": 300, "z_mm": 800, "beta_deg": 0}}': "outside_workspace",  # y: all training poses at 0
         b'{"pose": {"x_mm": 1400, "y_mm": 0, "z_mm": 6000, "beta_deg": 0}}': "unreachable_pose",
         b'{"pose": {"x_mm": 1400, "y_mm": 0, "z_mm": 800, "beta_deg": 0}, "cut": {"teeth": 0}}': "invalid_field",
         b'{"pose": {"x_mm": 1400, "y_mm": 0, "z_mm": 800, "beta_deg": 0}, "cut": {"rpm": -5}}': "invalid_field",

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import math
 import os
-from pathlib import Path
 
 from posedyn.errors import InputError
 from posedyn.io.params import check_keys, read_params, reading, whole_number
 from posedyn.sle import SleCut
 from posedyn.stability import Cut
+from posedyn.stability.cutting import check_rpm
 
 
 #: The tables and keys of a cut file (anything else is refused: a typo would take a default).
@@ -37,20 +37,28 @@ def read_cut(path: str | os.PathLike) -> tuple[Cut, float, int | None]:
     p = _read(path)
     with reading(path, "cut file"):
         c = p["cut"]
-        cut = Cut(
-            teeth=whole_number(c["teeth"], "cut.teeth"),
-            kt_pa=float(c["kt_mpa"]) * 1e6,
-            kn_pa=float(c["kn_mpa"]) * 1e6,
-            radial_immersion=float(c["radial_immersion"]),
-            milling=c.get("milling", "down"),
-            feed_angle_deg=float(c.get("feed_angle_deg", 0.0)),
-        )
-        rpm = float(c["rpm"])
+        try:
+            cut = Cut(
+                teeth=whole_number(c["teeth"], "cut.teeth"),
+                kt_pa=float(c["kt_mpa"]) * 1e6,
+                kn_pa=float(c["kn_mpa"]) * 1e6,
+                radial_immersion=float(c["radial_immersion"]),
+                milling=c.get("milling", "down"),
+                feed_angle_deg=float(c.get("feed_angle_deg", 0.0)),
+            )
+        except InputError as exc:  # named as the file writes it
+            key, factor = FILE_KEYS.get(exc.column, (exc.column, None))
+            got = exc.got * factor if factor is not None and isinstance(exc.got, (int, float)) else exc.got
+            raise InputError(exc.expected, got=got, column=key) from None
+        rpm = check_rpm(float(c["rpm"]), "cut.rpm")
         steps = p.get("stability", {}).get("steps")
         steps = None if steps is None else whole_number(steps, "stability.steps")
-    if not rpm > 0:
-        raise InputError("rpm > 0", got=rpm, column="rpm", file=str(Path(path)))
     return cut, rpm, steps
+
+
+#: Cut's fields as a cut file names them, with the factor to the file's unit.
+FILE_KEYS = {"kt_pa": ("cut.kt_mpa", 1e-6), "kn_pa": ("cut.kn_mpa", 1e-6), "teeth": ("cut.teeth", None), "radial_immersion": ("cut.radial_immersion", None),
+             "milling": ("cut.milling", None), "feed_angle_deg": ("cut.feed_angle_deg", None)}
 
 
 def read_sle_cut(path: str | os.PathLike) -> tuple[SleCut, float] | None:

@@ -58,6 +58,7 @@ def save_model(model: PoseModel, folder: str | os.PathLike) -> None:
             "created_by": f"posedyn {__version__}",
             "method": model.method,
             "features": model.features_,
+            "fixed_pose": model.fixed_pose_,
             "x_mean": model.x_mean_.tolist(),
             "x_scale": model.x_scale_.tolist(),
             "targets": model.targets_,
@@ -133,6 +134,7 @@ def load_model(folder: str | os.PathLike) -> PoseModel:
     try:
         model = PoseModel(method=doc["method"], features=doc["features"])
         model.features_ = list(doc["features"])
+        model.fixed_pose_ = {str(k): float(v) for k, v in doc.get("fixed_pose", {}).items()}  # (absent before 2026-12-04: none known)
         model.x_mean_, model.x_scale_ = np.array(doc["x_mean"]), np.array(doc["x_scale"])
         model.targets_ = list(doc["targets"])
 

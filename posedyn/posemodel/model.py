@@ -94,6 +94,11 @@ def to_model_space(names: list[str], Y: np.ndarray) -> np.ndarray:
         return np.where(cross[None, :], 1.0 / Y, np.log(np.abs(Y)))
 
 
+def _least_margin(column: str) -> float:
+    """The least widening of the workspace beyond the training poses: 15 deg or 50 mm."""
+    return 15.0 if column.endswith("_deg") else 50.0
+
+
 def select_features(poses: PoseSet, requested: list[str] | None) -> list[str]:
     """The pose columns to learn from: as requested, or every position/orientation column that
     varies over the training poses."""
@@ -223,6 +228,8 @@ class PoseModel:
         if len(poses) < 2:
             raise InputError("at least two training poses", got=len(poses), column="pose_id")
         self.features_ = select_features(poses, self.features)
+        self.fixed_pose_ = {c: float(v[0]) for c, v in poses.numeric_columns().items()
+                            if c not in JOINT_COLUMNS and c not in self.features_ and np.ptp(v) == 0}
         X = feature_matrix(poses, self.features_)
         self.x_mean_ = X.mean(axis=0)
         self.x_scale_ = np.where(X.std(axis=0) > 0, X.std(axis=0), 1.0)
@@ -331,13 +338,18 @@ class PoseModel:
         return mean, std
 
     def workspace_bounds(self) -> dict[str, tuple[float, float]]:
-        """{feature: (lo, hi)}: the training range of each pose feature widened by a quarter of
-        it, at least 50 mm or 15 deg. Beyond, a Gaussian process returns its prior (the service
-        refuses such poses, `posedyn schedule` warns)."""
+        """{pose column: (lo, hi)}: the training range of each pose feature widened by a quarter
+        of it, at least 50 mm or 15 deg, and 50 mm or 15 deg either side of a column the training
+        poses all share (`fixed_pose_`: not a feature, so the model cannot see it change: trained
+        at y = 0, a pose at y = 300 mm got the y = 0 prediction with its tight std). Beyond, a
+        Gaussian process returns its prior (the service refuses such poses, `posedyn schedule`
+        warns)."""
         X = self.X_train_ * self.x_scale_ + self.x_mean_
         lo, hi = X.min(axis=0), X.max(axis=0)
-        margin = np.maximum(0.25 * (hi - lo), np.array([15.0 if f.endswith("_deg") else 50.0 for f in self.features_]))
-        return {f: (float(a - m), float(b + m)) for f, a, b, m in zip(self.features_, lo, hi, margin)}
+        margin = np.maximum(0.25 * (hi - lo), np.array([_least_margin(f) for f in self.features_]))
+        bounds = {f: (float(a - m), float(b + m)) for f, a, b, m in zip(self.features_, lo, hi, margin)}
+        bounds.update({c: (v - _least_margin(c), v + _least_margin(c)) for c, v in self.fixed_pose_.items()})
+        return bounds
 
     def outside_workspace(self, poses: PoseSet) -> list[str]:
         """One line per pose feature outside `workspace_bounds` ('pose P: x_mm = 1000 outside

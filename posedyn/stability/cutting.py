@@ -25,6 +25,23 @@ import numpy as np
 from posedyn.errors import InputError, check_choice, check_finite, check_positive
 
 
+#: Physical ranges of a cut, the same wherever a cut comes from (a cut file, a flag, a service
+#: request): specific cutting-force coefficients from soft aluminium (~100 MPa) to hardened steel
+#: and nickel alloys (~6 GPa) with margin (a coefficient in N/m^2 written into an MPa key is
+#: 1e6 times too large, 7.96e8 MPa, and gave a 5.7e-7 mm depth), milling cutters up to 32 teeth,
+#: the spindle speeds of milling spindles.
+MAX_COEFFICIENT_PA = 2e10
+MAX_TEETH = 32
+RPM_RANGE = (100.0, 100_000.0)
+
+
+def check_rpm(rpm: float, column: str = "rpm") -> float:
+    """A spindle speed within RPM_RANGE (rpm), else InputError."""
+    if isinstance(rpm, bool) or not isinstance(rpm, (int, float, np.floating, np.integer)) or not RPM_RANGE[0] <= rpm <= RPM_RANGE[1]:
+        raise InputError(f"a spindle speed from {RPM_RANGE[0]:g} to {RPM_RANGE[1]:g} rpm", got=rpm, column=column)
+    return float(rpm)
+
+
 @dataclass(frozen=True)
 class Cut:
     """Tool, material and engagement of a milling cut (speed and depth are separate arguments).
@@ -42,10 +59,12 @@ class Cut:
     feed_angle_deg: float = 0.0
 
     def __post_init__(self):
-        if not isinstance(self.teeth, (int, np.integer)) or isinstance(self.teeth, bool) or self.teeth < 1:
-            raise InputError("an integer number of teeth >= 1", got=self.teeth, column="teeth")
-        check_positive("kt_pa", self.kt_pa)
-        check_finite("kn_pa", self.kn_pa)
+        if not isinstance(self.teeth, (int, np.integer)) or isinstance(self.teeth, bool) or not 1 <= self.teeth <= MAX_TEETH:
+            raise InputError(f"an integer number of teeth from 1 to {MAX_TEETH}", got=self.teeth, column="teeth")
+        if not 0.0 < check_positive("kt_pa", self.kt_pa) <= MAX_COEFFICIENT_PA:
+            raise InputError(f"a tangential cutting coefficient up to {MAX_COEFFICIENT_PA * 1e-9:g} GPa", got=self.kt_pa, column="kt_pa")
+        if not 0.0 <= check_finite("kn_pa", self.kn_pa) <= MAX_COEFFICIENT_PA:
+            raise InputError(f"a normal cutting coefficient from 0 to {MAX_COEFFICIENT_PA * 1e-9:g} GPa", got=self.kn_pa, column="kn_pa")
         check_finite("radial_immersion", self.radial_immersion)
         if not 0.0 < self.radial_immersion <= 1.0:
             raise InputError("a radial immersion a_e / D in (0, 1]", got=self.radial_immersion, column="radial_immersion")

@@ -96,6 +96,7 @@ def modal_input_for(model_dir: Optional[Path], modes: Optional[Path], poses, dis
         if missing:
             raise InputError("pose_ids present in the modal table", got=missing[:3], file=str(poses), column="pose_id")
         table = table.select_poses([table.poses.index(p) for p in pose_set.pose_id])
+        _same_poses(pose_set, table.poses, None if isinstance(poses, PoseSet) else str(poses), str(modes))
         return table, distributions_from_table(table) if distributions else None
     model = load_model(model_dir)
     warn_outside_workspace(model, pose_set)
@@ -106,12 +107,23 @@ def modal_input_for(model_dir: Optional[Path], modes: Optional[Path], poses, dis
     return table, model.predict_distributions(pose_set, table) if distributions else None
 
 
+def _same_poses(asked: PoseSet, table: PoseSet, file: Optional[str], table_file: str) -> None:
+    """The poses asked for by pose_id from a modal table are where the table has them (a pose
+    file's P5 at x = 1450 silently got the table's P5 at x = 1400, and `tool-change` wrote 1400)."""
+    mine, theirs = asked.numeric_columns(), table.numeric_columns()
+    for i in range(len(asked)):
+        for column, values in mine.items():
+            if column in theirs and not math.isclose(float(values[i]), float(theirs[column][i]), rel_tol=1e-9, abs_tol=1e-6):
+                raise InputError(f"pose {asked.pose_id[i]} where {table_file} has it, {column} = {float(theirs[column][i]):g}", got=float(values[i]),
+                                 file=file, row=i + 1, line=None if file is None else i + 2, column=column)
+
+
 def warn_outside_workspace(model, pose_set: PoseSet) -> None:
     """The poses `posedyn serve` would refuse (outside the model's workspace), said on stderr (a
     command's --json output stays strict JSON)."""
     for line in model.outside_workspace(pose_set):
-        print(f"warning: {line}, the model's workspace (its training range widened by a quarter): a Gaussian process this far "
-              "from its data returns its prior, and `posedyn serve` refuses the pose (outside_workspace)", file=sys.stderr)
+        print(f"warning: {line}, the model's workspace (the training poses' range widened by a quarter, at least 50 mm or 15 deg): "
+              "the model has not seen the dynamics there, and `posedyn serve` refuses the pose (outside_workspace)", file=sys.stderr)
 
 
 def twin_modes_at(twin: Path, poses: PoseSet, poses_file: Path) -> list[PoseModes]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import io
+import sys
 import json
 from pathlib import Path
 from typing import Optional
@@ -51,6 +52,10 @@ def plan(
     weight = np.array([weights[u] for u in back])
     coil, drive = config.coil, read_drive(absorber)
     result = FieldPlanner(len(time_s) - 1, config.absorber, coil, drive).solve(time_s, target, weight)
+    if result.solver["status"] != "solved":  # IPOPT's last iterate: no plan to write or compare (a 0 to 1e9 s path was 95 % off in re-simulation)
+        print(f"error: the coil planner did not converge ({result.solver['status']} after {result.solver['iterations']} iterations) on {path}'s "
+              f"times ({time_s[0]:g} to {time_s[-1]:g} s): nothing written", file=sys.stderr)
+        raise typer.Exit(1)
     check = simulate(coil, drive, config.absorber, time_s, result.voltage_v)
     baseline = step_schedule(coil, drive, config.absorber, time_s, target)
     lo, hi = config.absorber.range_hz

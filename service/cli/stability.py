@@ -18,6 +18,7 @@ from posedyn.errors import InputError
 from posedyn.io import read_modal_table
 from posedyn.io.atomic import write_text_atomic
 from posedyn.stability import Cut, Discretization, StabilityModel, StabilityResult, absolute_limit, critical_lobes, critical_points, zoa
+from posedyn.stability.cutting import check_rpm
 from service.cli.common import Milling, console, finite_or_none, flag_errors, output_file, print_json
 
 
@@ -77,8 +78,7 @@ def chatter(
 ):
     """Critical depth and dominant chatter frequency at one spindle speed (converged to 2 %)."""
     pose, model = _setup(modes, pose_id, teeth, kt_mpa, kn_mpa, radial_immersion, milling, feed_angle_deg, steps, order)
-    if not np.isfinite(rpm) or rpm <= 0:
-        raise InputError("a spindle speed > 0", got=rpm, column="--rpm")
+    check_rpm(rpm, "--rpm")
     if steps is None:
         result = critical_points([model.dyn], model.cut, rpm)[0]
         family = result.family
@@ -155,8 +155,10 @@ def lobes(
     if steps is not None:  # the expert override, as in `posedyn chatter`
         method = Method.sdm
     pose, model = _setup(modes, pose_id, teeth, kt_mpa, kn_mpa, radial_immersion, milling, feed_angle_deg, steps, order)
-    if not (np.isfinite(rpm_min) and np.isfinite(rpm_max) and 0 < rpm_min < rpm_max):
-        raise InputError("0 < --rpm-min < --rpm-max", got=(rpm_min, rpm_max), column="--rpm-min")
+    check_rpm(rpm_min, "--rpm-min")
+    check_rpm(rpm_max, "--rpm-max")
+    if not rpm_min < rpm_max:
+        raise InputError("--rpm-min < --rpm-max", got=(rpm_min, rpm_max), column="--rpm-min")
     if rpm_steps < 2:
         raise InputError("at least 2 speeds", got=rpm_steps, column="--rpm-steps")
     rpm = np.linspace(rpm_min, rpm_max, rpm_steps)

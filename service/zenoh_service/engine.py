@@ -45,10 +45,12 @@ def model_version(training_hash: str, robust_samples: int = 0, tools: tuple[Path
 class ScheduleEngine:
     """A loaded model, the default cut and the absorber and controller settings.
 
-    Poses are checked before any prediction: inverse kinematics on the model's twin (else the
+    Poses are checked before any prediction, in this order: inverse kinematics on the model's twin (else the
     given twin file, else the shipped KR R2700 twin) must succeed (`unreachable_pose`), and each of the model's pose features
     must lie within its training range widened by a quarter of that range, at least 50 mm or
-    15 deg (`outside_workspace`: a Gaussian process far from its data returns its prior)."""
+    15 deg, and a column all training poses share within 50 mm or 15 deg of it
+    (`outside_workspace`, `PoseModel.workspace_bounds`: a Gaussian process far from its data
+    returns its prior, and one that never saw a column change cannot know its effect)."""
 
     def __init__(self, model_dir: Path, cut: Path, absorber: Path | None = None, actuator: Path | None = None, twin: Path | None = None,
                  robust_samples: int = 0, tools: tuple[Path, Path] | None = None, pivot_mm: float = 150.0):
@@ -83,6 +85,8 @@ class ScheduleEngine:
         (`absorber.field_plan`; the service's absorber and its file's drive, the default coil)."""
         coil, drive = Coil(), self.drive
         plan = FieldPlanner(len(times_s) - 1, self.absorber, coil, drive).solve(times_s, targets_hz)
+        if plan.solver["status"] != "solved":  # IPOPT's last iterate is no trajectory to follow (95 % off in re-simulation, seen)
+            return {"solver": plan.solver, "error": "the coil planner did not converge: no trajectory"}
         return {"voltage_v": plan.voltage_v.tolist(), "current_a": plan.current_a.tolist(), "field_mt": (1e3 * plan.field_t).tolist(),
                 "temperature_c": plan.temperature_c.tolist(), "frequency_hz": plan.frequency_hz.tolist(), "solver": plan.solver}
 
@@ -105,19 +109,20 @@ class ScheduleEngine:
         except InputError as exc:
             raise RequestError("invalid_field", f"pose: {exc}") from None
         columns = poses.numeric_columns()
-        for feature, (lo, hi) in self.bounds.items():
-            if feature not in columns:
-                raise RequestError("missing_field", f"pose.{feature}: the model needs it (its features are {list(self.bounds)})")
-            value = float(columns[feature][0])
-            if not lo <= value <= hi:
-                raise RequestError("outside_workspace", f"pose.{feature}: expected within [{lo:g}, {hi:g}] (the training range widened by a quarter), got {value:g}")
-        if self.robot is not None:
+        missing = [f for f in self.model.features_ if f not in columns]
+        if missing:
+            raise RequestError("missing_field", f"pose.{missing[0]}: the model needs it (its features are {self.model.features_})")
+        if self.robot is not None:  # out of reach first: where the robot cannot go, the model's workspace is moot
             try:
                 with self._lock:
                     joints = self.robot.inverse(tool_pose(poses, 0))
             except InputError as exc:
                 raise RequestError("unreachable_pose", f"pose: no inverse kinematics solution ({exc})") from None
             poses = replace(poses, joints_deg=np.degrees(np.asarray(joints)).reshape(1, 6))
+        for feature, (lo, hi) in self.bounds.items():  # a column all training poses shared is checked where given
+            value = float(columns[feature][0]) if feature in columns else lo
+            if not lo <= value <= hi:
+                raise RequestError("outside_workspace", f"pose.{feature}: expected within [{lo:g}, {hi:g}] (the training poses' range widened by a quarter, at least 50 mm or 15 deg), got {value:g}")
         return poses
 
 

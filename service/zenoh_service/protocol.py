@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 import math
 
+from posedyn.stability.cutting import MAX_COEFFICIENT_PA, MAX_TEETH, RPM_RANGE
+
 POSE_FIELDS = ("pose_id", "x_mm", "y_mm", "z_mm", "beta_deg", "a_deg", "b_deg", "c_deg")
 CUT_FIELDS = ("rpm", "teeth", "kt_mpa", "kn_mpa", "radial_immersion", "milling", "feed_angle_deg")
 
@@ -21,13 +23,12 @@ RANGES = {
     "a_deg": (-360.0, 360.0, True),
     "b_deg": (-360.0, 360.0, True),
     "c_deg": (-360.0, 360.0, True),
-    "rpm": (100.0, 100_000.0, True),
-    "kt_mpa": (0.0, 20_000.0, False),
-    "kn_mpa": (0.0, 20_000.0, True),
+    "rpm": (*RPM_RANGE, True),  # the cut's ranges: posedyn.stability.cutting, as for a cut file or a flag
+    "kt_mpa": (0.0, MAX_COEFFICIENT_PA * 1e-6, False),
+    "kn_mpa": (0.0, MAX_COEFFICIENT_PA * 1e-6, True),
     "radial_immersion": (0.0, 1.0, False),
     "feed_angle_deg": (-360.0, 360.0, True),
 }
-MAX_TEETH = 32
 TIMEOUT_MS = (1, 3_600_000)  # the querier's budget for one request
 
 
