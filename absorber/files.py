@@ -8,6 +8,7 @@ drive and thermal values (e.g. the modulus temperature law); `posedyn gap --out`
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
@@ -25,12 +26,29 @@ from posedyn.io.params import read_params, reading
 from posedyn.stability.cutting import Cut
 
 
+#: The keys of an absorber file's tables that `read_absorber` reads (others there are refused: a
+#: misspelt optional key would silently keep its default), and MRFAbsorber's fields as the file
+#: names them (with the factor to the file's unit).
+ABSORBER_KEYS = {
+    "absorber": ("mass_kg", "r1_m", "r2_m", "l1_m", "w1_m", "h1_m", "h2_m", "elastomer_shear_modulus_pa", "loss_factor_elastomer"),
+    "mrf": ("model", "density_kg_per_m3", "g0_pa", "ginf_pa", "a1", "a2", "loss_factor_mrf", "zeta_per_tesla"),
+    "field": ("min_mt", "max_mt"),
+}
+ABSORBER_FILE_NAMES = {"g2_pa": ("absorber.elastomer_shear_modulus_pa", None), "field_min_t": ("field.min_mt", 1e3), "field_max_t": ("field.max_mt", 1e3),
+                       **{k: (f"absorber.{k}", None) for k in ("mass_kg", "r1_m", "r2_m", "l1_m", "w1_m", "h1_m", "h2_m", "loss_factor_elastomer")},
+                       **{k: (f"mrf.{k}", None) for k in ("g0_pa", "ginf_pa", "a1", "a2", "loss_factor_mrf", "zeta_per_tesla")}}
+
+
 def read_absorber(path: str | os.PathLike | None) -> MRFAbsorber:
     """The `[absorber]`, `[mrf]`, `[field]` tables of an absorber parameter file."""
     if path is None:
         return MRFAbsorber()
     p = read_params(path)
-    with reading(path, "absorber file"):
+    for table, allowed in ABSORBER_KEYS.items():
+        for key in p.get(table, {}):
+            if key not in allowed:
+                raise InputError(f"one of the keys {', '.join(allowed)} in [{table}]", got=key, file=str(Path(path)), column=f"{table}.{key}")
+    with reading(path, "absorber file"), _named_as_the_file(ABSORBER_FILE_NAMES):
         a, m, f = p["absorber"], p["mrf"], p["field"]
         return MRFAbsorber(
             mass_kg=a["mass_kg"], r1_m=a["r1_m"], r2_m=a["r2_m"], l1_m=a["l1_m"], w1_m=a["w1_m"], h1_m=a["h1_m"], h2_m=a["h2_m"],
@@ -39,6 +57,25 @@ def read_absorber(path: str | os.PathLike | None) -> MRFAbsorber:
             **{k: m[k] for k in ("loss_factor_mrf", "zeta_per_tesla") if k in m},
             **{k: a[k] for k in ("loss_factor_elastomer",) if k in a},
         )
+
+
+@contextlib.contextmanager
+def _named_as_the_file(names: dict):
+    """An InputError about a dataclass field named as the file writes it (`names`: field ->
+    (file key, factor to the file's unit)): 'field.max_mt ... got 700', not 'field_max_t ... 0.7'."""
+    try:
+        yield
+    except InputError as exc:
+        if exc.column not in names:
+            raise
+        key, factor = names[exc.column]
+        got = exc.got
+        if factor is not None:
+            got = tuple(v * factor for v in got) if isinstance(got, tuple) else got * factor if isinstance(got, (int, float)) else got
+        expected = exc.expected
+        for field, (file_key, _) in names.items():
+            expected = expected.replace(field, file_key)
+        raise InputError(expected, got=got, column=key) from None
 
 
 def read_drive(path: str | os.PathLike | None) -> CoilDrive:

@@ -283,3 +283,22 @@ def test_the_tuning_cache_round_trips_exactly_and_a_bad_file_is_ignored(tmp_path
         tuning._TUNED.update(saved)
     path.write_text('{"schema_version": 1, "tunings": [{"layout": "nonsense"}]}')
     assert load_tuning_cache(path) == 0 and "ignored" in caplog.text
+
+
+@pytest.mark.parametrize("old, new, column, expected", [
+    ("max_mt = 600.0", "max_mt = -5.0", "field.max_mt", "field.max_mt > field.min_mt"),
+    ("g0_pa = 2.51e3", "g0_pa = -1", "mrf.g0_pa", "a number > 0"),
+    ("mass_kg = 3.0", "mass_kg = 3.0\nmass_g = 3", "absorber.mass_g", "one of the keys mass_kg"),
+])
+def test_an_absorber_file_error_names_the_files_key(datasets, tmp_path, old, new, column, expected):
+    """A new user's absorber file errors named MRFAbsorber's fields in SI ('field_max_t', tesla)
+    and a misspelt key was taken silently: the file's own key, in the file's unit."""
+    text = (datasets / "seeds/hou2023_mrf_absorber.toml").read_text()
+    assert old in text
+    bad = tmp_path / "absorber.toml"
+    bad.write_text(text.replace(old, new))
+    with pytest.raises(InputError) as err:
+        read_absorber(bad)
+    assert err.value.file == str(bad) and err.value.column == column and err.value.expected.startswith(expected)
+    if column == "field.max_mt":
+        assert err.value.got == (0.0, -5.0)  # mT, as written
