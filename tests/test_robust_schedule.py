@@ -81,7 +81,8 @@ def test_certain_modes_guarantee_the_nominal_depth_and_spread_lowers_it(datasets
 def robust_schedule(model_dir, tmp_path_factory):
     folder = tmp_path_factory.mktemp("robust")
     (folder / "poses.csv").write_text(POSES)
-    done = posedyn("schedule", model_dir, "--poses", folder / "poses.csv", "--cut", CUT, "--robust", "--robust-samples", "16", "--seed", "3", "--json")
+    # --robust-samples alone turns --robust on, as in sweep and serve (it was silently ignored here)
+    done = posedyn("schedule", model_dir, "--poses", folder / "poses.csv", "--cut", CUT, "--robust-samples", "16", "--seed", "3", "--json")
     assert done.returncode == 0, done.stderr
     return folder, json.loads(done.stdout)
 

@@ -177,13 +177,15 @@ def schedule(
     target_tool: Optional[Path] = typer.Option(None, "--target-tool", help="Schedule for this tool: its modes from the reference tool's by receptance coupling (as `posedyn tool-change`)."),
     pivot_mm: float = typer.Option(150.0, "--pivot-mm", help="With --target-tool: where the holder side turns, behind the holder face."),
     robust: bool = typer.Option(False, "--robust", help="Also the depth a cell can count on: the 95 % lower bound over samples of each pose's modes (the model's predictive distribution, or the table's std columns), bare and with the nominal or robust absorber setting."),
-    robust_samples: int = typer.Option(32, "--robust-samples", min=8, max=2000, help="Latin-hypercube samples per pose for --robust."),
+    robust_samples: Optional[int] = typer.Option(None, "--robust-samples", min=8, max=2000, help="Latin-hypercube samples per pose for --robust (32; given alone, it turns --robust on, as in sweep and serve)."),
     seed: int = typer.Option(0, "--seed", help="Sampling seed for --robust."),
     out: Optional[Path] = typer.Option(None, "--out", help="Write the schedule (JSON)."),
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Per-pose absorber schedule: chatter, target frequency, field, current, depths."""
     output_file(out, "--out")
+    robust = robust or robust_samples is not None  # (the flag alone was ignored here where sweep and serve took it)
+    robust_samples = 32 if robust_samples is None else robust_samples
     the_cut, rpm, steps = read_cut(resolve_cut(cut, model_dir))
     config = ScheduleConfig(the_cut, rpm, read_absorber(absorber), control=read_actuator(actuator), policy=policy.value, steps=steps,
                             robust_samples=robust_samples if robust else 0, robust_seed=seed)
