@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import logging
 import signal
 import sys
@@ -17,7 +18,7 @@ from posedyn.io import read_pose_table
 from posedyn.io.modal_csv import read_tool_path
 from service.cli.common import console, resolve_cut
 from service.zenoh_service.client import ScheduleClient, ServiceError
-from service.zenoh_service.protocol import RequestError
+from service.zenoh_service.protocol import RequestError, valid_cell, valid_plan_id
 from service.zenoh_service.server import ScheduleService, ServiceSettings
 from service.zenoh_service.session import DEFAULT_LISTEN, zenoh_config
 from service.zenoh_service.signing import read_key
@@ -116,6 +117,7 @@ def query(
     """Ask the schedule service for a pose's schedule, or send it a tool path as a plan."""
     if (pose_json is None) == (plan is None):
         raise InputError("either --pose-json or --plan", column="--pose-json")
+    _check_query_flags(cell, connect, plan_id or (plan.stem if plan is not None else None), timeout_s)
     cut = _json_option(cut_json, "--cut-json") if cut_json else None
     key = read_key(signing_key) if signing_key else None
     pose = rows = times = None  # the request read before connecting: a bad one is exit 2 without a wait
@@ -171,6 +173,24 @@ def query(
 
 def _g(value) -> str:
     return "-" if value is None else f"{value:.4g}"
+
+
+def _check_query_flags(cell: str, connect: list[str], plan_id: Optional[str], timeout_s: float) -> None:
+    """The flags `query` can judge before it connects (each was a wait and an exit 3, or Zenoh's
+    debug text): the cell and plan id as the service accepts them, endpoints as PROTOCOL/ADDRESS,
+    a timeout > 0."""
+    for flag, value, check in (("--cell", cell, valid_cell), ("--plan-id", plan_id, valid_plan_id)):
+        if value is not None:
+            try:
+                check(value)
+            except RequestError as exc:
+                raise InputError(exc.message.partition(": expected ")[2].rpartition(", got")[0], got=value, column=flag) from None
+    for endpoint in connect:
+        protocol, slash, address = endpoint.partition("/")
+        if not (slash and address and protocol and all(c.isalnum() or c == "-" for c in protocol)):
+            raise InputError("an endpoint PROTOCOL/ADDRESS, e.g. tcp/127.0.0.1:7447", got=endpoint, column="--connect")
+    if not (math.isfinite(timeout_s) and timeout_s > 0):
+        raise InputError("a timeout > 0 s", got=timeout_s, column="--timeout-s")
 
 
 def _json_option(text: str, option: str) -> dict:

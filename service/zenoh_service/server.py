@@ -49,7 +49,7 @@ from zenoh.ext import CacheConfig, declare_advanced_publisher
 
 from service.zenoh_service import keys, workers
 from service.zenoh_service.engine import canonical
-from service.zenoh_service.protocol import RequestError, parse_plan_request, parse_schedule_request, parse_timeout, valid_plan_id
+from service.zenoh_service.protocol import RequestError, parse_plan_request, parse_schedule_request, parse_timeout, valid_cell, valid_plan_id
 from service.zenoh_service.session import secure_defaults
 from service.zenoh_service.signing import reply_signature, sample_signature
 from service.zenoh_service.state import SCHEMA_VERSION, PlanStore
@@ -82,8 +82,7 @@ class ServiceSettings:
     default_timeout_s: float = 10.0  # a querier's budget when its request does not say (Zenoh's default)
 
     def __post_init__(self):
-        if not self.cell or not all(c.isalnum() or c in "-_" for c in self.cell):
-            raise RequestError("invalid_cell", f"cell: expected letters, digits, - or _, got {self.cell!r}")
+        valid_cell(self.cell)
         for f in fields(self):
             value = getattr(self, f.name)
             if f.name != "cell" and not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
