@@ -42,6 +42,20 @@ def output_file(path: Path | None, option: str) -> Path | None:
     return path
 
 
+def output_folder(path: Path, option: str) -> Path:
+    """An output folder checked before any work: a folder (made later if missing) whose nearest
+    existing ancestor is a folder this user can write ('afile: File exists' after the whole
+    computation, for a file given as the folder)."""
+    if path.exists() and not path.is_dir():
+        raise InputError("a folder to write into, not a file", got=str(path), file=str(path), column=option)
+    existing = path
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir() or not os.access(existing, os.W_OK):
+        raise InputError("a folder this user can write (or a new one in such a folder)", got=str(existing), file=str(path), column=option)
+    return path
+
+
 #: Library field -> (the command-line flag that gives it, factor from SI to the flag's unit).
 FLAGS = {
     "teeth": ("--teeth", None), "kt_pa": ("--kt-mpa", 1e-6), "kn_pa": ("--kn-mpa", 1e-6), "radial_immersion": ("--radial-immersion", None),

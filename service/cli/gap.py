@@ -22,7 +22,7 @@ from posedyn.io.model_dir import load_model, save_model
 from posedyn.io.params import read_params, write_params
 from posedyn.io.shipped import SEED004_ABSORBER, SHIPPED_TWIN
 from posedyn.io.twin_file import read_twin, write_twin
-from service.cli.common import console, output_file, resolve_cut
+from service.cli.common import console, output_file, output_folder, resolve_cut
 from service.gap.baseline import Baseline, generate_measurements
 from service.gap.report import render
 
@@ -40,6 +40,7 @@ def gap(
     """Find where the model and the measurements disagree, name the missing effect, add it, show the gap shrink."""
     if (model is None) == (not twin):
         raise InputError("either --model MODEL_DIR or --twin", column="--model")
+    output_folder(out, "--out")
     m = read_measurements(measured)
     if cut is None and model is not None and (model / "cut.toml").exists():
         cut = resolve_cut(cut, model)  # the model's cut; without one, only critical_depth_mm and sle_um rows need --cut

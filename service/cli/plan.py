@@ -20,7 +20,7 @@ from posedyn.io.cut import read_cut
 from posedyn.io.modal_csv import read_tool_path
 from posedyn.errors import InputError
 from service.cli.absorber import Policy
-from service.cli.common import console, modal_table_for, print_json, resolve_cut, twin_modes_at
+from service.cli.common import console, modal_table_for, output_folder, print_json, resolve_cut, twin_modes_at
 
 COLUMNS = ("time_s", "pose_id", "target_hz", "voltage_v", "current_a", "field_mt", "fluid_field_mt", "temperature_c", "frequency_hz", "step_frequency_hz", "step_current_a")
 
@@ -38,6 +38,7 @@ def plan(
 ):
     """Plan the coil's voltage along a tool path so the absorber stays on each point's target (CasADi, IPOPT)."""
     poses, time_s = read_tool_path(path)
+    output_folder(out, "--out")
     if len(time_s) < 2:
         raise InputError("a path of at least two points", got=len(time_s), file=str(path), column="time_s")
     the_cut, rpm, steps = read_cut(resolve_cut(cut, model_dir))
