@@ -282,3 +282,15 @@ def test_report_renders_in_headless_chromium(twin_sweep, tmp_path):
         assert image["complete"] and image["width"] > 100 and image["height"] > 100, image
     assert result["errors"] == []
     assert shot.stat().st_size > 20_000
+
+
+def test_a_grid_whose_twin_is_missing_is_named(tmp_path):
+    """The grid's twin file missing was reported as the twin's path alone, not the grid that named it."""
+    from posedyn.errors import InputError
+    from posedyn.io.grid import read_grid
+
+    grid = tmp_path / "grid.toml"
+    grid.write_text(GRID.format(twin="nothere.toml"))
+    with pytest.raises(InputError) as err:
+        read_grid(grid)
+    assert err.value.file == str(grid) and err.value.column == "meta.twin" and str(tmp_path / "nothere.toml") in err.value.expected

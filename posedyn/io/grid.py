@@ -70,7 +70,10 @@ def read_grid(path: str | os.PathLike) -> Grid:
     if len(set(labels)) != len(labels):
         raise InputError("distinct poses (labels repeat)", got=sorted({x for x in labels if labels.count(x) > 1})[:3], **where)
     twin = p["meta"].get("twin")
-    return Grid(tuple(poses), effects, (path.parent / twin).resolve() if twin else None, p["meta"]["source"])
+    twin_path = (path.parent / twin).resolve() if twin else None
+    if twin_path is not None and not twin_path.is_file():  # named here: the grid said it, not the user
+        raise InputError(f"a twin file (relative to the grid) at {twin_path}", got="missing", file=str(path), column="meta.twin")
+    return Grid(tuple(poses), effects, twin_path, p["meta"]["source"])
 
 
 def _numbers(table: dict, key: str) -> list[float]:
