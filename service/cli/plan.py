@@ -5,7 +5,6 @@ from __future__ import annotations
 import csv
 import io
 import sys
-import json
 from pathlib import Path
 from typing import Optional
 
@@ -86,7 +85,15 @@ def plan(
     if as_json:
         print_json(summary)
         return
-    console.print(json.dumps(summary, indent=2))
+    plan_, step, depth = summary["plan"], summary["step_schedule"], summary["min_critical_depth_mm"]
+    console.print(f"{summary['points']} points, solver {summary['solver']['status']} ({summary['solver']['iterations']} iterations); "
+                  f"re-simulation within {100 * summary['resimulation_max_rel_error']:.2g} %")
+    console.print(f"plan:          mistuned by {plan_['max_mistune_pct']:.3g} % at most, {plan_['max_voltage_v']:.3g} V, {plan_['max_temperature_c']:.3g} C; "
+                  f"lowest critical depth {depth['plan']:.4g} mm")
+    console.print(f"step schedule: mistuned by {step['max_mistune_pct']:.3g} % at most, asks {step['asked_voltage_v']:.3g} V; lowest critical depth {depth['step_schedule']:.4g} mm")
+    if summary["outside_absorber_range"]:
+        console.print(f"{summary['outside_absorber_range']} points target a frequency outside the absorber's range (clamped)")
+    console.print(f"trajectory: {summary['trajectory']} (and .png)")
 
 
 def _path_modes(model_dir, modes, twin, poses, path) -> list:
