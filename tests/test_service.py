@@ -54,6 +54,7 @@ def test_every_bad_input_gets_its_error_and_the_service_keeps_answering(client):
     cases = {
         b"{": "malformed_json",
         b"\xff\xfe": "malformed_json",
+        b'{"pose": {"x_mm": 1400, "x_mm": 9000, "y_mm": 0, "z_mm": 800, "beta_deg": 0}}': "malformed_json",  # a key twice: which counts?
         b"": "missing_payload",
         b'{"pose": {"x_mm": 1400, "y_mm": 0, "z_mm": 800}}': "missing_field",
         b'{"pose": {"x_mm": 1400, "y_mm": 0, "z_mm": 800, "beta_deg": 0, "speed": 3}}': "unknown_field",

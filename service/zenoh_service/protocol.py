@@ -65,8 +65,15 @@ def parse_json(payload: bytes | None, max_bytes: int, required: bool = True):
     def refuse(constant):
         raise RequestError("not_finite", f"expected finite numbers, got {constant}")
 
+    def unique(pairs):  # a key given twice: which one counts is the parser's choice, not the sender's
+        keys = [k for k, _ in pairs]
+        twice = sorted({k for k in keys if keys.count(k) > 1})
+        if twice:
+            raise RequestError("malformed_json", f"expected each key once in an object, got {twice[0]!r} twice")
+        return dict(pairs)
+
     try:
-        return json.loads(text, parse_constant=refuse)
+        return json.loads(text, parse_constant=refuse, object_pairs_hook=unique)
     except RequestError:
         raise
     except (ValueError, RecursionError) as exc:
