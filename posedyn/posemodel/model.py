@@ -289,6 +289,14 @@ class PoseModel:
         self.prior_model_ = prior_model
         return prior, {"used": True, "stiffness_scales": scales.tolist(), "targets_with_prior": int(has.sum()), "fit_converged": bool(result.success)}
 
+    def observation_noise_std(self) -> np.ndarray:
+        """The fitted observation noise std of every target in model space (T,): a measurement is
+        the latent value plus this (the predictive std excludes it)."""
+        out = np.zeros(len(self.targets_))
+        for gp, targets in zip(self.gps_, self.groups_):
+            out[targets] = np.sqrt(gp.noise_variances) * self.y_scale_[targets]
+        return out
+
     def predict_log(self, poses: PoseSet):
         """Mean and std of ln(value) for every target at every pose, (n, T) each."""
         X = (feature_matrix(poses, self.features_) - self.x_mean_) / self.x_scale_
@@ -423,8 +431,10 @@ def r2_score(predicted: np.ndarray, actual: np.ndarray) -> float:
 
 def cross_validate(make_model, table: ModalTable, folds: int = 5, seed: int = 0) -> dict:
     """k-fold cross-validation over poses (seed 003 section 5.2): per target the mean and
-    sample standard deviation of R^2 over the folds, the R^2 of all held-out predictions pooled
-    and the RMSE over all held-out poses. R^2 is undefined on a fold of fewer than two poses (or
+    sample standard deviation of R^2 over the folds, the R^2 of all held-out predictions pooled,
+    the RMSE over all held-out poses and how honest the predictive distribution of a measurement
+    was there (`z_rms`: the rms of the held-out errors in its stds, latent std and the fitted
+    observation noise together, in model space; 1 is honest). R^2 is undefined on a fold of fewer than two poses (or
     whose values do not vary): the mean and std then cover the folds where it is defined, are
     None where fewer than one (mean) or two (std) folds have it, and `note` says so."""
     n = len(table.poses)
@@ -434,13 +444,19 @@ def cross_validate(make_model, table: ModalTable, folds: int = 5, seed: int = 0)
     parts = np.array_split(order, folds)
     names, Y = table_targets(table)
     predicted = np.full_like(Y, np.nan)
+    spread = np.full_like(Y, np.nan)
     r2 = []
     for test in parts:
         train = np.setdiff1d(order, test)
         model = make_model().fit(table.select_poses(train))
         index = [model.targets_.index(t) for t in names]
-        out = model.predict(table.select_poses(test).poses)[:, index]
+        poses = table.select_poses(test).poses
+        out = model.predict(poses)[:, index]
         predicted[test] = out
+        mean_m, std_m = model.predict_log(poses)  # in model space (logs; compliances for cross terms), where the noise is
+        total = np.hypot(std_m, model.observation_noise_std())[:, index]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            spread[test] = (to_model_space(names, Y[test]) - mean_m[:, index]) / total
         r2.append([r2_score(out[:, j], Y[test, j]) if len(test) >= 2 else float("nan") for j in range(len(names))])
     r2 = np.array(r2)
     result = {}
@@ -452,6 +468,7 @@ def cross_validate(make_model, table: ModalTable, folds: int = 5, seed: int = 0)
             "r2_std": float(defined.std(ddof=1)) if len(defined) >= 2 else None,
             "r2_pooled": pooled if np.isfinite(pooled) else None,
             "rmse": float(np.sqrt(np.mean((predicted[:, j] - Y[:, j]) ** 2))),
+            "z_rms": float(np.sqrt(np.mean(spread[:, j] ** 2))) if np.all(np.isfinite(spread[:, j])) else None,
         }
         if len(defined) < folds:
             entry["note"] = (f"R2 is undefined on {folds - len(defined)} of {folds} folds (fewer than two poses, or values that do not vary): "

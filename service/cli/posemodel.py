@@ -76,13 +76,18 @@ def train(
         console.print(f"physics prior: {model.physics_}")
     if report["cv"]:
         t = Table(title=f"{cv}-fold cross-validation over poses", title_justify="left")
-        for c in ("target", "R2 mean", "R2 std", "R2 pooled", "RMSE"):
+        for c in ("target", "R2 mean", "R2 std", "R2 pooled", "RMSE", "errors in stds (rms)"):
             t.add_column(c, justify="right")
         notes = set()
         for name, v in report["cv"].items():
-            t.add_row(name, *("-" if v[k] is None else f"{v[k]:.4f}" for k in ("r2_mean", "r2_std", "r2_pooled")), f"{v['rmse']:.4g}")
+            t.add_row(name, *("-" if v[k] is None else f"{v[k]:.4f}" for k in ("r2_mean", "r2_std", "r2_pooled")), f"{v['rmse']:.4g}",
+                      "-" if v["z_rms"] is None else f"{v['z_rms']:.3g}")
             notes.update([v["note"].split(":")[0]] if "note" in v else [])
         console.print(t)
+        over = [name for name, v in report["cv"].items() if v["z_rms"] is not None and v["z_rms"] > 2.0]
+        if over:
+            console.print(f"note: the predictive distribution of {', '.join(over[:6])}{' ...' if len(over) > 6 else ''} was too narrow on the held-out poses "
+                          "(their errors more than 2 stds rms, the fitted measurement noise included): read those stds, and what --robust draws from them, as a lower bound")
         for note in sorted(notes):
             console.print(f"note: {note} (see --json)")
 
