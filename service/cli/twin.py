@@ -22,6 +22,11 @@ app = typer.Typer(help="The robot twin: modes at a pose, synthetic modal-test ca
 EFFECT = typer.Option(None, "--effect", help="Hide a named effect, e.g. device_mass:mass_kg=8 (repeatable).")
 
 
+
+#: A mode whose tool-tip stiffness in a direction is above this many times its lowest is shown as
+#: not seen there (a new user read 1.48e+36 N/m as a number).
+UNSEEN = 1e6
+
 @app.command("campaign")
 def campaign(
     grid: Path = typer.Option(..., "--grid", help="Pose grid (TOML)."),
@@ -82,9 +87,11 @@ def modes(
         print_json({"joints_deg": [math.degrees(v) for v in q], "modes": rows})
         return
     console.print("joints (deg): " + ", ".join(f"A{j + 1} {math.degrees(v):.2f}" for j, v in enumerate(q)))
-    table = Table(title="robot modes at the tool tip", title_justify="left")
+    table = Table(title="robot modes at the tool tip", title_justify="left",
+                  caption=f"-: the mode hardly moves the tool tip that way (its stiffness there above {UNSEEN:.0e} x its lowest; --json has the number)")
     for column in ("mode", "fn_hz", "zeta", "kx_n_per_m", "ky_n_per_m", "kz_n_per_m"):
         table.add_column(column, justify="right")
     for row in rows:
-        table.add_row(str(row["mode"]), f"{row['fn_hz']:.2f}", f"{row['zeta']:.3f}", *(f"{row[f'k{d}_n_per_m']:.3g}" for d in "xyz"))
+        k = [row[f"k{d}_n_per_m"] for d in "xyz"]
+        table.add_row(str(row["mode"]), f"{row['fn_hz']:.2f}", f"{row['zeta']:.3f}", *("-" if v > UNSEEN * min(k) else f"{v:.3g}" for v in k))
     console.print(table)
