@@ -336,7 +336,7 @@ def test_train_and_predict_cli_contract(datasets, tmp_path):
     out = json.loads(result.stdout)
     assert out["method"] == "stgp" and out["n_poses"] == 7
     assert set(out["cv"]) == {"x1.fn_hz", "x1.zeta", "x1.k_n_per_m", "y1.fn_hz", "y1.zeta", "y1.k_n_per_m"}
-    assert {"r2_mean", "r2_std", "r2_pooled", "rmse"} <= set(out["cv"]["x1.fn_hz"]) <= {"r2_mean", "r2_std", "r2_pooled", "rmse", "note"}
+    assert {"r2_mean", "r2_std", "r2_pooled", "rmse", "z_rms"} <= set(out["cv"]["x1.fn_hz"]) <= {"r2_mean", "r2_std", "r2_pooled", "rmse", "z_rms", "note"}
     poses = tmp_path / "poses.csv"
     poses.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nnew,1450,0,800,0\n")
     result = posedyn("predict", tmp_path / "m", "--poses", poses, "--out", tmp_path / "pred.csv", "--json")
