@@ -120,3 +120,13 @@ def test_cross_validation_says_how_honest_the_predictive_std_was(tmp_path):
     assert z["x1.zeta"] > 1.5 and z["x1.k_n_per_m"] > 5
     code, text, _ = cli_in_process("train", SEED004, "--cv", "7", "--out", tmp_path / "model2")
     assert code == 0 and "was too narrow on the held-out poses" in text
+
+
+def test_flags_that_would_be_ignored_or_refused_later_are_errors_at_once(tmp_path):
+    """`absorber robust --rpm-steps 1` silently ignored --rpm-max; `serve --pivot-mm -5` with a
+    tool change started and refused every query."""
+    done = run_cli("absorber", "robust", "--host", DATA / "seeds/dogan2024_host_milling.toml", "--rpm-min", "2700", "--rpm-max", "3000", "--rpm-steps", "1")
+    assert done.returncode == 2 and done.stderr.startswith("error: column '--rpm-steps'")
+    done = run_cli("serve", "--model", tmp_path, "--cell", "c", "--cut", DATA / "seeds/hou2023_cut.toml", "--state-dir", tmp_path / "state",
+                   "--reference-tool", DATA / "seeds/seed003_reference_tool.toml", "--target-tool", DATA / "seeds/seed003_target_tool.toml", "--pivot-mm", "-5")
+    assert done.returncode == 2 and done.stderr.startswith("error: column '--pivot-mm'") and not (tmp_path / "state").exists()

@@ -99,6 +99,8 @@ def robust(
     uncertainty, cut = case.uncertainty, case.cut
     if not 0 < rpm_min <= rpm_max:
         raise InputError("0 < --rpm-min <= --rpm-max", got=f"{rpm_min}, {rpm_max}", column="--rpm-min")
+    if rpm_steps == 1 and rpm_max != rpm_min:  # one speed is --rpm-min: --rpm-max would be ignored
+        raise InputError("--rpm-steps 2 or more for a range (one speed: --rpm-max equal to --rpm-min)", got=rpm_steps, column="--rpm-steps")
     mu = mass_ratio if mass_ratio is not None else case.mass_ratio
     if layout is not None and mu is None:
         raise InputError("--mass-ratio or [absorber] mass_ratio in the host file", got="neither", file=str(host_file), column="--mass-ratio")

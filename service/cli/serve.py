@@ -74,6 +74,8 @@ def serve(
         raise InputError("--robust-samples 0 (off) or 8-2000", got=robust_samples, column="--robust-samples")
     if (reference_tool is None) != (target_tool is None):
         raise InputError("--reference-tool and --target-tool together", got="one of them", column="--target-tool")
+    if target_tool is not None and not (math.isfinite(pivot_mm) and pivot_mm > 0):  # (the service started and refused every query)
+        raise InputError("a pivot distance > 0 mm", got=pivot_mm, column="--pivot-mm")
     spec = EngineSpec(model, cut, absorber, actuator, twin, robust_samples, None if target_tool is None else (reference_tool, target_tool), pivot_mm)
     spec.build()  # every file checked here, with its name in the error, before any process starts
     if not listen and not connect and config is None:
