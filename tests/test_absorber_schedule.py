@@ -129,8 +129,15 @@ def test_absorber_cli_contracts():
         "--layout", "tmd", "--teeth", 4, "--kt-mpa", 660, "--kn-mpa", 180, "--radial-immersion", 0.5, "--milling", "down", "--json",
     )
     out = json.loads(result.stdout)
-    assert set(out) == {"layout", "gamma", "zeta_a", "delta", "eta", "absolute_limit_mm", "uncontrolled_limit_mm"}
+    assert set(out) == {"layout", "gamma", "zeta_a", "delta", "eta", "absolute_limit_mm", "uncontrolled_limit_mm", "at_search_bound"}
     assert out["delta"] is None and out["absolute_limit_mm"] > 2.5 * out["uncontrolled_limit_mm"]
+    assert out["at_search_bound"] == [] and result.stderr == ""
+    # a mass ratio of 50 put gamma on its search bound (0.5) without a word: said now
+    result = posedyn(
+        "absorber", "tune", "--host-fn-hz", 129.29, "--host-k-n-per-m", 1.34e7, "--host-zeta", 0.0134, "--mass-ratio", 50,
+        "--layout", "tmd", "--teeth", 4, "--kt-mpa", 660, "--kn-mpa", 180, "--radial-immersion", 0.5, "--milling", "down", "--json",
+    )
+    assert json.loads(result.stdout)["at_search_bound"] == ["gamma"] and "the optimum lies beyond it" in result.stderr
 
 
 def test_schedule_cli_from_a_table_and_from_a_model(datasets, tmp_path):

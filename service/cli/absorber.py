@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from enum import Enum
 from pathlib import Path
 from typing import Optional
@@ -15,7 +16,7 @@ from rich.table import Table
 from absorber.chain import ScheduleConfig, schedule_entries, schedule_poses
 from absorber.files import read_absorber, read_actuator, read_host
 from absorber.robust import METHODS, cutting_force_harmonics, monte_carlo_limits, robust_tuning
-from absorber.tuning import Host, absolute_limit_m, min_real_part, tune_sims, uncontrolled_min_real_part
+from absorber.tuning import BOUNDS, Host, absolute_limit_m, min_real_part, tune_sims, uncontrolled_min_real_part
 from posedyn.errors import InputError
 from posedyn.io.tool_file import read_tool
 from posedyn.tool_change import tool_changed_table
@@ -73,6 +74,11 @@ def tune(
         "absolute_limit_mm": finite_or_none(absolute_limit_m(min_real_part(tuned, host_zeta), host, h) * 1e3),
         "uncontrolled_limit_mm": finite_or_none(absolute_limit_m(uncontrolled_min_real_part(host_zeta), host, h) * 1e3),
     }
+    # an optimum on the edge of the range searched is no optimum (a new user's mass ratio 50 gave gamma = 0.5 without a word)
+    out["at_search_bound"] = [k for k, (lo, hi) in BOUNDS.items() if out.get(k) is not None and (math.isclose(out[k], lo, rel_tol=1e-6) or math.isclose(out[k], hi, rel_tol=1e-6))]
+    if out["at_search_bound"]:
+        print(f"warning: {', '.join(out['at_search_bound'])} at the edge of the range searched ({', '.join(f'{k} {BOUNDS[k][0]:g}-{BOUNDS[k][1]:g}' for k in out['at_search_bound'])}): "
+              f"the optimum lies beyond it (mass ratio {mass_ratio:g}; absorbers are about 0.005-0.2)", file=sys.stderr)
     if as_json:
         print_json(out)
         return
