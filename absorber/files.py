@@ -8,7 +8,6 @@ drive and thermal values (e.g. the modulus temperature law); `posedyn gap --out`
 
 from __future__ import annotations
 
-import contextlib
 import json
 import logging
 import os
@@ -22,7 +21,7 @@ from absorber.robust import HostUncertainty
 from absorber.tuning import Host, known_tunings, remember_tunings
 from posedyn.errors import InputError, check_non_negative, check_positive
 from posedyn.io.atomic import write_text_atomic
-from posedyn.io.params import read_params, reading
+from posedyn.io.params import named_as, read_params, reading
 from posedyn.stability.cutting import Cut
 
 
@@ -48,7 +47,7 @@ def read_absorber(path: str | os.PathLike | None) -> MRFAbsorber:
         for key in p.get(table, {}):
             if key not in allowed:
                 raise InputError(f"one of the keys {', '.join(allowed)} in [{table}]", got=key, file=str(Path(path)), column=f"{table}.{key}")
-    with reading(path, "absorber file"), _named_as_the_file(ABSORBER_FILE_NAMES):
+    with reading(path, "absorber file"), named_as(ABSORBER_FILE_NAMES, in_expected=True):
         a, m, f = p["absorber"], p["mrf"], p["field"]
         return MRFAbsorber(
             mass_kg=a["mass_kg"], r1_m=a["r1_m"], r2_m=a["r2_m"], l1_m=a["l1_m"], w1_m=a["w1_m"], h1_m=a["h1_m"], h2_m=a["h2_m"],
@@ -57,25 +56,6 @@ def read_absorber(path: str | os.PathLike | None) -> MRFAbsorber:
             **{k: m[k] for k in ("loss_factor_mrf", "zeta_per_tesla") if k in m},
             **{k: a[k] for k in ("loss_factor_elastomer",) if k in a},
         )
-
-
-@contextlib.contextmanager
-def _named_as_the_file(names: dict):
-    """An InputError about a dataclass field named as the file writes it (`names`: field ->
-    (file key, factor to the file's unit)): 'field.max_mt ... got 700', not 'field_max_t ... 0.7'."""
-    try:
-        yield
-    except InputError as exc:
-        if exc.column not in names:
-            raise
-        key, factor = names[exc.column]
-        got = exc.got
-        if factor is not None:
-            got = tuple(v * factor for v in got) if isinstance(got, tuple) else got * factor if isinstance(got, (int, float)) else got
-        expected = exc.expected
-        for field, (file_key, _) in names.items():
-            expected = expected.replace(field, file_key)
-        raise InputError(expected, got=got, column=key) from None
 
 
 def read_drive(path: str | os.PathLike | None) -> CoilDrive:
@@ -115,10 +95,8 @@ def read_actuator(path: str | os.PathLike | None) -> ControlConfig:
         for key in control:
             if key not in keys:
                 raise InputError("a [control] key among " + ", ".join(keys), got=key, column=f"control.{key}")
-        try:
+        with named_as({k: (f"control.{k}", None) for k in keys}):
             return ControlConfig(actuator=actuator, **{k: control[k] for k in keys if k in control})
-        except InputError as exc:  # named as the file writes it
-            raise InputError(exc.expected, got=exc.got, column=f"control.{exc.column}") from None
 
 
 @dataclass(frozen=True)

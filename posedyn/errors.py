@@ -58,6 +58,23 @@ class InputError(ValueError):
                 fields[key] = value
         return InputError(self.expected, got=self.got, **fields)
 
+    def renamed(self, names: dict, in_expected: bool = False) -> "InputError":
+        """The same error about a field named as the file or flag that gave it: `names` maps
+        field -> (that name, factor from the field's unit to its unit, or None); the value (a
+        number or a tuple of numbers) scaled, with `in_expected` also the field names in the
+        expected text ('field.max_mt > field.min_mt', not 'field_max_t > field_min_t'). The error
+        itself where its column is not in `names`."""
+        if self.column not in names:
+            return self
+        name, factor = names[self.column]
+        got = self.got
+        if factor is not None:
+            got = tuple(v * factor for v in got) if isinstance(got, tuple) else got * factor if isinstance(got, (int, float)) else got
+        expected = self.expected
+        for field, (other, _) in names.items() if in_expected else ():
+            expected = expected.replace(field, other)
+        return InputError(expected, got=got, file=self.file, row=self.row, line=self.line, column=name)
+
 
 def _plain(value: Any) -> Any:
     """A value as the user wrote it: numpy scalars (and those inside tuples and lists) as Python

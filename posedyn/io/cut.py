@@ -11,8 +11,7 @@ from __future__ import annotations
 import math
 import os
 
-from posedyn.errors import InputError
-from posedyn.io.params import check_keys, read_params, reading, whole_number
+from posedyn.io.params import check_keys, named_as, read_params, reading, whole_number
 from posedyn.sle import SleCut
 from posedyn.stability import Cut
 from posedyn.stability.cutting import check_rpm
@@ -37,7 +36,7 @@ def read_cut(path: str | os.PathLike) -> tuple[Cut, float, int | None]:
     p = _read(path)
     with reading(path, "cut file"):
         c = p["cut"]
-        try:
+        with named_as(FILE_KEYS):
             cut = Cut(
                 teeth=whole_number(c["teeth"], "cut.teeth"),
                 kt_pa=float(c["kt_mpa"]) * 1e6,
@@ -46,10 +45,6 @@ def read_cut(path: str | os.PathLike) -> tuple[Cut, float, int | None]:
                 milling=c.get("milling", "down"),
                 feed_angle_deg=float(c.get("feed_angle_deg", 0.0)),
             )
-        except InputError as exc:  # named as the file writes it
-            key, factor = FILE_KEYS.get(exc.column, (exc.column, None))
-            got = exc.got * factor if factor is not None and isinstance(exc.got, (int, float)) else exc.got
-            raise InputError(exc.expected, got=got, column=key) from None
         rpm = check_rpm(float(c["rpm"]), "cut.rpm")
         steps = p.get("stability", {}).get("steps")
         steps = None if steps is None else whole_number(steps, "stability.steps")

@@ -88,6 +88,15 @@ def reading(path: str | os.PathLike, what: str):
         raise InputError(f"numbers in the {what}", got=str(exc), **where) from None
 
 
+@contextmanager
+def named_as(names: dict, in_expected: bool = False):
+    """InputErrors about an object's fields named as the file writes them (`InputError.renamed`)."""
+    try:
+        yield
+    except InputError as exc:
+        raise exc.renamed(names, in_expected) from None
+
+
 def write_params(path: str | os.PathLike, params: dict, comment: str = "") -> None:
     """A parameter file from {table: {key: value}} (strings, numbers, booleans and lists of
     numbers; `[meta]` first), `comment` as its leading # lines, atomically; read_params reads it

@@ -337,7 +337,10 @@ class PoseModel:
         """Mean (and std) of every target at every pose, original units, (n, T): log-normal
         moments for the positive parameters; for a cross stiffness k = 1 / c with c normal,
         1 / mu and s / mu^2 (first order)."""
-        mu, s = self.predict_log(poses)
+        return self._original_units(*self.predict_log(poses), return_std)
+
+    def _original_units(self, mu: np.ndarray, s: np.ndarray, return_std: bool = False):
+        """`predict` from `predict_log`'s mean and std in model space."""
         cross = getattr(self, "cross_", np.zeros(len(self.targets_), dtype=bool))
         mean = np.where(cross, 1.0 / np.where(mu != 0, mu, np.inf), np.exp(mu + 0.5 * s**2))
         if not return_std:
@@ -450,10 +453,9 @@ def cross_validate(make_model, table: ModalTable, folds: int = 5, seed: int = 0)
         train = np.setdiff1d(order, test)
         model = make_model().fit(table.select_poses(train))
         index = [model.targets_.index(t) for t in names]
-        poses = table.select_poses(test).poses
-        out = model.predict(poses)[:, index]
+        mean_m, std_m = model.predict_log(table.select_poses(test).poses)  # in model space (logs; compliances for cross terms), where the noise is
+        out = model._original_units(mean_m, std_m)[:, index]
         predicted[test] = out
-        mean_m, std_m = model.predict_log(poses)  # in model space (logs; compliances for cross terms), where the noise is
         total = np.hypot(std_m, model.observation_noise_std())[:, index]
         with np.errstate(divide="ignore", invalid="ignore"):
             spread[test] = (to_model_space(names, Y[test]) - mean_m[:, index]) / total

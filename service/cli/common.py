@@ -72,11 +72,9 @@ def flag_errors():
     try:
         yield
     except InputError as exc:
-        if exc.column not in FLAGS or exc.file is not None:
+        if exc.file is not None:  # a file's value: named by the file
             raise
-        flag, factor = FLAGS[exc.column]
-        got = exc.got * factor if factor is not None and isinstance(exc.got, (int, float)) else exc.got
-        raise InputError(exc.expected, got=got, column=flag) from None
+        raise exc.renamed(FLAGS) from None
 
 
 def finite_or_none(value: float):

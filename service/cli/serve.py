@@ -18,7 +18,7 @@ from posedyn.io import read_pose_table
 from posedyn.io.modal_csv import read_tool_path
 from service.cli.common import console, resolve_cut
 from service.zenoh_service.client import ScheduleClient, ServiceError
-from service.zenoh_service.protocol import RequestError, valid_cell, valid_plan_id
+from service.zenoh_service.protocol import CELL_RULE, PLAN_ID_RULE, RequestError, valid_cell, valid_plan_id
 from service.zenoh_service.server import ScheduleService, ServiceSettings
 from service.zenoh_service.session import DEFAULT_LISTEN, zenoh_config
 from service.zenoh_service.signing import read_key
@@ -66,7 +66,7 @@ def serve(
         settings = ServiceSettings(cell, **limits)
     except RequestError as exc:  # named as the flag it came from
         if exc.code == "invalid_cell":
-            raise InputError("a cell name of letters, digits, - or _", got=cell, column="--cell") from None
+            raise InputError(f"a cell name of {CELL_RULE}", got=cell, column="--cell") from None
         name = exc.message.partition(":")[0]
         raise InputError("a finite number > 0", got=limits.get(name), column="--" + name.replace("_", "-")) from None
     key = read_key(signing_key) if signing_key else None
@@ -181,12 +181,12 @@ def _check_query_flags(cell: str, connect: list[str], plan_id: Optional[str], ti
     """The flags `query` can judge before it connects (each was a wait and an exit 3, or Zenoh's
     debug text): the cell and plan id as the service accepts them, endpoints as PROTOCOL/ADDRESS,
     a timeout > 0."""
-    for flag, value, check in (("--cell", cell, valid_cell), ("--plan-id", plan_id, valid_plan_id)):
+    for flag, value, check, rule in (("--cell", cell, valid_cell, CELL_RULE), ("--plan-id", plan_id, valid_plan_id, PLAN_ID_RULE)):
         if value is not None:
             try:
                 check(value)
-            except RequestError as exc:
-                raise InputError(exc.message.partition(": expected ")[2].rpartition(", got")[0], got=value, column=flag) from None
+            except RequestError:
+                raise InputError(rule, got=value, column=flag) from None
     for endpoint in connect:
         protocol, slash, address = endpoint.partition("/")
         if not (slash and address and protocol and all(c.isalnum() or c == "-" for c in protocol)):

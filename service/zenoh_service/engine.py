@@ -119,8 +119,10 @@ class ScheduleEngine:
             except InputError as exc:
                 raise RequestError("unreachable_pose", f"pose: no inverse kinematics solution ({exc})") from None
             poses = replace(poses, joints_deg=np.degrees(np.asarray(joints)).reshape(1, 6))
-        for feature, (lo, hi) in self.bounds.items():  # a column all training poses shared is checked where given
-            value = float(columns[feature][0]) if feature in columns else lo
+        for feature, (lo, hi) in self.bounds.items():
+            if feature not in columns:  # a column all training poses shared: checked where given
+                continue
+            value = float(columns[feature][0])
             if not lo <= value <= hi:
                 raise RequestError("outside_workspace", f"pose.{feature}: expected within [{lo:g}, {hi:g}] (the training poses' range widened by a quarter, at least 50 mm or 15 deg), got {value:g}")
         return poses

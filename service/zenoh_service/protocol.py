@@ -199,14 +199,18 @@ def parse_times(value, count: int, where: str = "request.times_s") -> list[float
     return times
 
 
+#: What a cell name and a plan id may be (each a key expression's chunk: no wildcards, no '/').
+CELL_RULE = "letters, digits, - or _"
+PLAN_ID_RULE = "1-100 characters from A-Z a-z 0-9 - _ ."
+
+
 def valid_cell(cell: str) -> str:
-    """A cell name: letters, digits, - or _ (a key expression's chunk, no wildcards)."""
     if not cell or not all(c.isalnum() or c in "-_" for c in cell):
-        raise RequestError("invalid_cell", f"cell: expected letters, digits, - or _, got {cell!r}")
+        raise RequestError("invalid_cell", f"cell: expected {CELL_RULE}, got {cell!r}")
     return cell
 
 
 def valid_plan_id(plan_id: str) -> str:
     if not plan_id or len(plan_id) > 100 or not all(c.isalnum() or c in "-_." for c in plan_id):
-        raise RequestError("invalid_plan_id", f"plan id: expected 1-100 characters from A-Z a-z 0-9 - _ ., got {plan_id[:40]!r}")
+        raise RequestError("invalid_plan_id", f"plan id: expected {PLAN_ID_RULE}, got {plan_id[:40]!r}")
     return plan_id
