@@ -250,7 +250,7 @@ def gain_schedule(loop: DVF, fn_hz: float, disturbance_n: float, margin_db: floa
     k_max = loop.nyquist_gain_limit() if loop.open_loop_stable() else 0.0
     if not math.isfinite(k_max) or k_max <= 0:
         raise InputError(f"a velocity-feedback loop at {fn_hz:.4g} Hz that is stable at small gains and loses stability at some finite gain "
-                         "(the actuator's delay_ms, fn_hz and zeta decide it)", got=k_max, column="gain")
+                         "(the actuator's delay_ms, fn_hz and zeta decide it)", got=k_max, column="actuator")
     cap = k_max / 10 ** (margin_db / 20)
     gains = np.linspace(cap / 40, cap, 40)
     forces = loop.max_force_n(gains, disturbance_n)
@@ -287,6 +287,7 @@ class ControlConfig:
     margin_db: float = 6.0
     virtual_layout: str = "idva-c3"
     virtual_mass_ratio: float = 0.0055
+    source: str | None = field(default=None, compare=False)  # the actuator file it was read from (named in errors)
 
     def __post_init__(self):
         check_choice("mount_axis", self.mount_axis, ("x", "y", "z"))
@@ -364,7 +365,10 @@ def control_schedule_pose(pose_id: str, modes, tool_rotation: np.ndarray, config
     loop = DVF(H, H, H, config.actuator, fn_act, config.filters)
     host = dominant_mode(modes)
     entry = {"pose_id": pose_id, "actuator_angle_to_gravity_deg": math.degrees(angle)}
-    entry.update(gain_schedule(loop, host[0], config.disturbance_n, config.margin_db))
+    try:
+        entry.update(gain_schedule(loop, host[0], config.disturbance_n, config.margin_db))
+    except InputError as exc:  # a property of the actuator file: named with it
+        raise exc.located(file=config.source) from None
     entry["force_limit_n"] = config.actuator.force_limit_n
     entry["virtual_absorber"] = virtual_absorber(host, config)
     return entry

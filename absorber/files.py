@@ -49,6 +49,8 @@ def read_absorber(path: str | os.PathLike | None) -> MRFAbsorber:
                 raise InputError(f"one of the keys {', '.join(allowed)} in [{table}]", got=key, file=str(Path(path)), column=f"{table}.{key}")
     with reading(path, "absorber file"), named_as(ABSORBER_FILE_NAMES, in_expected=True):
         a, m, f = p["absorber"], p["mrf"], p["field"]
+        if "density_kg_per_m3" in m:  # documentation of the fluid (no model uses it), but never a wrong one
+            check_positive("mrf.density_kg_per_m3", m["density_kg_per_m3"])
         return MRFAbsorber(
             mass_kg=a["mass_kg"], r1_m=a["r1_m"], r2_m=a["r2_m"], l1_m=a["l1_m"], w1_m=a["w1_m"], h1_m=a["h1_m"], h2_m=a["h2_m"],
             g2_pa=a["elastomer_shear_modulus_pa"], g0_pa=m["g0_pa"], ginf_pa=m["ginf_pa"], a1=m["a1"], a2=m["a2"],
@@ -96,7 +98,7 @@ def read_actuator(path: str | os.PathLike | None) -> ControlConfig:
             if key not in keys:
                 raise InputError("a [control] key among " + ", ".join(keys), got=key, column=f"control.{key}")
         with named_as({k: (f"control.{k}", None) for k in keys}):
-            return ControlConfig(actuator=actuator, **{k: control[k] for k in keys if k in control})
+            return ControlConfig(actuator=actuator, source=str(path), **{k: control[k] for k in keys if k in control})
 
 
 @dataclass(frozen=True)

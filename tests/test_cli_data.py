@@ -84,3 +84,34 @@ def test_an_error_shows_numpy_numbers_as_the_user_wrote_them():
     message = str(InputError("std > 0", got=np.float64(-1.3), row=1, column="std"))
     assert message.endswith("expected std > 0, got -1.3")
     assert str(InputError("x", got=(np.str_("x"), np.int64(3)))).endswith("got ('x', 3)")
+
+
+def test_flags_and_file_keys_are_named_as_the_user_wrote_them(tmp_path, datasets):
+    """A bad flag value is named by its flag ('--host-fn-hz', not the library's 'fn_hz'); an
+    actuator whose loop has no stable gain is named with its file; help text keeps the TOML
+    section names ('[host]' vanished as rich markup); an absorber file's fluid density must be
+    a density."""
+    cut = ("--layout", "tmd", "--teeth", 2, "--kt-mpa", 600, "--kn-mpa", 200, "--radial-immersion", 1)
+    host = {"--host-fn-hz": 100, "--host-zeta": 0.01, "--host-k-n-per-m": 1e7, "--mass-ratio": 0.05}
+    for flag, bad in (("--host-fn-hz", -5), ("--host-zeta", -0.01), ("--host-k-n-per-m", "nan"), ("--mass-ratio", -1)):
+        args = [x for k, v in {**host, flag: bad}.items() for x in (k, v)]
+        result = posedyn("absorber", "tune", *args, *cut)
+        assert result.returncode == 2 and result.stderr.startswith(f"error: column '{flag}'"), result.stderr
+    assert posedyn("absorber", "field", "--target-hz", -3).stderr.startswith("error: column '--target-hz'")
+    result = posedyn("twin", "campaign", "--grid", datasets / "campaigns/seed003_grid.toml", "--out", tmp_path / "c.csv", "--noise-fn-pct", -1)
+    assert result.returncode == 2 and result.stderr.startswith("error: column '--noise-fn-pct'")
+    result = posedyn("twin", "modes", "--x-mm", "nan", "--y-mm", 0, "--z-mm", 600, "--beta-deg", 0)
+    assert result.returncode == 2 and result.stderr.startswith("error: column '--x-mm': expected a finite number")
+    assert "[host], [cut]" in posedyn("absorber", "robust", "--help").stdout
+
+    actuator = tmp_path / "slow_actuator.toml"
+    actuator.write_text((datasets / "seeds/sahu2024_active_damping.toml").read_text().replace("delay_ms = 0.6", "delay_ms = 600"))
+    poses = tmp_path / "p5.csv"
+    poses.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nP5,1400,0,800,0\n")
+    result = posedyn("control", "schedule", "--modes", datasets / "seeds/hou2023_positions.csv", "--poses", poses, "--actuator", actuator)
+    assert result.returncode == 2 and result.stderr.startswith(f"error: {actuator}, column 'actuator'") and "delay_ms" in result.stderr
+
+    absorber = tmp_path / "absorber.toml"
+    absorber.write_text((datasets / "seeds/hou2023_mrf_absorber.toml").read_text().replace("density_kg_per_m3 = 2550.0", "density_kg_per_m3 = 0.0"))
+    result = posedyn("absorber", "field", "--target-hz", 20, "--absorber", absorber)
+    assert result.returncode == 2 and result.stderr.startswith(f"error: {absorber}, column 'mrf.density_kg_per_m3'")

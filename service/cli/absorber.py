@@ -24,9 +24,9 @@ from posedyn.io.atomic import write_text_atomic
 from posedyn.io.cut import read_cut
 from posedyn.io import read_pose_table
 from posedyn.stability import Cut, mean_force_matrix
-from service.cli.common import Milling, console, finite_or_none, modal_input_for, output_file, print_json, resolve_cut, twin_modes_at
+from service.cli.common import Milling, console, finite_or_none, flag_errors, modal_input_for, output_file, print_json, resolve_cut, twin_modes_at
 
-app = typer.Typer(help="MRF absorber: optimal tuning, field for a target frequency.", no_args_is_help=True)
+app = typer.Typer(help="MRF absorber: optimal tuning, field for a target frequency.", no_args_is_help=True, rich_markup_mode=None)  # plain help, as the main app (service.cli)
 
 
 class Layout(str, Enum):
@@ -35,6 +35,11 @@ class Layout(str, Enum):
     c4 = "idva-c4"
     c5 = "idva-c5"
     c6 = "idva-c6"
+
+
+#: The library's fields as `absorber tune` and `robust` name them (`flag_errors`).
+HOST_FLAGS = {"fn_hz": ("--host-fn-hz", None), "zeta": ("--host-zeta", None), "k_n_per_m": ("--host-k-n-per-m", None),
+              "mass_ratio": ("--mass-ratio", None), "target_hz": ("--target-hz", None)}
 
 
 class Policy(str, Enum):
@@ -59,12 +64,13 @@ def tune(
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Optimal absorber on a host mode (seed 002 eq. 18) and the absolute stability limits."""
-    host = Host(host_fn_hz, host_k_n_per_m, host_zeta)
-    cut = Cut(teeth=teeth, kt_pa=kt_mpa * 1e6, kn_pa=kn_mpa * 1e6, radial_immersion=radial_immersion, milling=milling.value)
-    h = mean_force_matrix(cut)[1, 1]  # the host mode is the flexible direction y, x rigid (seed 002)
-    if h <= 0:
-        raise InputError("a cut whose mean y directional coefficient is positive (seed 002's case)", got=h, column="--radial-immersion")
-    tuned = tune_sims(layout.value, mass_ratio, host_zeta, seed=seed)
+    with flag_errors(HOST_FLAGS):
+        host = Host(host_fn_hz, host_k_n_per_m, host_zeta)
+        cut = Cut(teeth=teeth, kt_pa=kt_mpa * 1e6, kn_pa=kn_mpa * 1e6, radial_immersion=radial_immersion, milling=milling.value)
+        h = mean_force_matrix(cut)[1, 1]  # the host mode is the flexible direction y, x rigid (seed 002)
+        if h <= 0:
+            raise InputError("a cut whose mean y directional coefficient is positive (seed 002's case)", got=h, column="--radial-immersion")
+        tuned = tune_sims(layout.value, mass_ratio, host_zeta, seed=seed)
     out = {
         "layout": layout.value,
         "gamma": float(tuned.gamma),
@@ -116,7 +122,8 @@ def robust(
         raise InputError("--method " + ", ".join(METHODS), got=method, column="--method")
     speeds = np.linspace(rpm_min, rpm_max, rpm_steps)
     harmonics = None if case.feed_per_tooth_m is None else cutting_force_harmonics(cut, case.feed_per_tooth_m)
-    tunings = {"nominal": None if layout is None else tune_sims(layout.value, mu, uncertainty.nominal.zeta)}
+    with flag_errors(HOST_FLAGS if mass_ratio is not None else None):  # (the host file's mass ratio is named by the file)
+        tunings = {"nominal": None if layout is None else tune_sims(layout.value, mu, uncertainty.nominal.zeta)}
     if robust_tuning_:  # tuned on other samples than it is judged on
         tunings["robust"] = robust_tuning(uncertainty, tunings["nominal"], cut, speeds, seed=seed + 1, force_harmonics=harmonics, force_limit_n=case.force_limit_n)
     out = {}
@@ -157,7 +164,8 @@ def field_cmd(
 ):
     """The coil field that tunes the MRF absorber to a frequency."""
     a = read_absorber(absorber)
-    setting = a.field_for_frequency(target_hz, clamp=True)
+    with flag_errors(HOST_FLAGS):
+        setting = a.field_for_frequency(target_hz, clamp=True)
     out = {
         "target_hz": target_hz,
         "field_mt": setting.field_t * 1e3,

@@ -66,15 +66,16 @@ FLAGS = {
 
 
 @contextlib.contextmanager
-def flag_errors():
+def flag_errors(extra: dict | None = None):
     """An InputError about a value that came from a flag names the flag and gives the value in
-    the flag's unit (not the library's field in SI: 'column kt_pa ... got -700000000.0')."""
+    the flag's unit (not the library's field in SI: 'column kt_pa ... got -700000000.0');
+    `extra`: a command's own fields and flags, as FLAGS ('fn_hz' is --host-fn-hz in one command)."""
     try:
         yield
     except InputError as exc:
         if exc.file is not None:  # a file's value: named by the file
             raise
-        raise exc.renamed(FLAGS) from None
+        raise exc.renamed(FLAGS | (extra or {})) from None
 
 
 def finite_or_none(value: float):

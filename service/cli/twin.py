@@ -16,9 +16,9 @@ from posedyn.io.twin_file import load_twin
 from posedyn.robot import ToolPose
 from posedyn.robot.campaign import GridPose, Noise, generate_campaign, pose_modes
 from posedyn.robot.twin_effects import parse_effect
-from service.cli.common import console, output_file, print_json
+from service.cli.common import console, flag_errors, output_file, print_json
 
-app = typer.Typer(help="The robot twin: modes at a pose, synthetic modal-test campaigns.", no_args_is_help=True)
+app = typer.Typer(help="The robot twin: modes at a pose, synthetic modal-test campaigns.", no_args_is_help=True, rich_markup_mode=None)  # plain help, as the main app (service.cli)
 EFFECT = typer.Option(None, "--effect", help="Hide a named effect, e.g. device_mass:mass_kg=8 (repeatable).")
 
 
@@ -45,7 +45,8 @@ def campaign(
     g = read_grid(grid)
     robot, params = load_twin(twin or g.twin, payload_kg)
     effects = g.effects + tuple(parse_effect(e) for e in effect or ())
-    noise = Noise(noise_fn_pct, noise_zeta_pct, noise_k_pct)
+    with flag_errors({"fn_pct": ("--noise-fn-pct", None), "zeta_pct": ("--noise-zeta-pct", None), "k_pct": ("--noise-k-pct", None)}):
+        noise = Noise(noise_fn_pct, noise_zeta_pct, noise_k_pct)
     label = f"twin {robot.name} seed {seed}" + ("; effects " + ", ".join(e.name for e in effects) if effects else "")
     table = generate_campaign(robot, list(g.poses), params, noise, seed, effects, source=label)
     write_modal_table(table, out)
@@ -73,6 +74,10 @@ def modes(
     """Joint angles and robot modes of the twin at one tool pose."""
     if (beta_deg is None) == (a_deg is None or b_deg is None or c_deg is None):
         raise InputError("either --beta-deg or all of --a-deg --b-deg --c-deg", column="--beta-deg")
+    given = {"--x-mm": x_mm, "--y-mm": y_mm, "--z-mm": z_mm, "--beta-deg": beta_deg, "--a-deg": a_deg, "--b-deg": b_deg, "--c-deg": c_deg}
+    for flag, value in given.items():
+        if value is not None and not math.isfinite(value):
+            raise InputError("a finite number", got=value, column=flag)
     if beta_deg is not None:
         pose = GridPose("pose", ToolPose.from_beta(x_mm / 1e3, y_mm / 1e3, z_mm / 1e3, math.radians(beta_deg)), beta_deg)
     else:
