@@ -236,3 +236,15 @@ def test_mode_validates_its_own_fields():
     assert mode.m_kg == pytest.approx(1e6 / (2 * math.pi * 10) ** 2)
     # receptance at resonance: 1 / (2 i zeta k)
     assert mode.receptance(mode.wn_rad_s) == pytest.approx(1 / (2j * 0.05 * 1e6))
+
+
+def test_a_pose_list_with_a_pose_twice_names_the_pose_not_a_mode(tmp_path):
+    """A pose list has no direction or mode column: its duplicate is named by pose_id and row
+    (it read 'got P5/x/1', the placeholder mode the pose reader adds)."""
+    from posedyn.io import read_pose_table
+
+    path = tmp_path / "poses.csv"
+    path.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nP5,1400,0,800,0\nP5,1400,0,800,0\n")
+    with pytest.raises(InputError) as info:
+        read_pose_table(path)
+    assert str(info.value) == f"{path}, row 2 (line 3), column 'pose_id': expected one row per pose_id (already in row 1), got 'P5'"

@@ -422,7 +422,11 @@ def parse_pose_table(text: str, source: str) -> PoseSet:
     try:
         return parse_modal_table("\n".join(lines) + "\n", source).poses
     except InputError as exc:
-        raise (exc if exc.column != "mode" else InputError("one row per pose_id", got=exc.got, file=source, row=exc.row, line=exc.line, column="pose_id")) from None
+        if exc.column != "mode":
+            raise
+        # the placeholder mode repeated: the pose_id (the placeholder's direction and mode are no column of a pose list)
+        already = exc.expected[exc.expected.find("(already") :]
+        raise InputError(f"one row per pose_id {already}".strip(), got=str(exc.got).split("/")[0], file=source, row=exc.row, line=exc.line, column="pose_id") from None
 
 
 def _quote(cell: str) -> str:
