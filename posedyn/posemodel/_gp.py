@@ -187,6 +187,23 @@ class Predictor:
         return (mean, std) if return_std else mean
 
 
+def loo_residuals(gp: GP) -> tuple[np.ndarray, np.ndarray]:
+    """Leave-one-pose-out residuals of a fitted GP and the std of the measurement each was
+    predicted with (latent plus noise), (n, T) each, at the fitted hyperparameters, in closed form
+    (no refit): with I the T entries of pose i, alpha = K^-1 y and C_i = (K^-1)_II,
+
+        y_I - mean_-i(I) = C_i^-1 alpha_I,    cov_-i(I) = C_i^-1
+
+    (Sundararajan and Keerthi 2001, Neural Computation 13(5), eq. 9-10, for blocks; one task:
+    alpha_i / [K^-1]_ii and 1 / [K^-1]_ii). From the Kronecker factors of the module docstring,
+    (C_i)_tu = sum_a P_ta P_ua sum_j V_ij^2 Dinv_aj: no (nT) x (nT) matrix."""
+    P, _, V, _, Dinv, _, _ = _factor(gp.theta, gp.X, gp.n_tasks)
+    alpha = P @ (Dinv * (P.T @ gp.Y.T @ V)) @ V.T  # (T, n)
+    C = np.einsum("ta,ia,ua->itu", P, (V * V) @ Dinv.T, P)  # (n, T, T)
+    cov = np.linalg.inv(C)
+    return np.einsum("itu,ui->it", cov, alpha), np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
+
+
 def fit_gps(X: np.ndarray, targets: list[np.ndarray], restarts: int = 2, seed: int = 0, workers: int | None = None) -> list["GP"]:
     """`fit_gp` for several target groups (one GP each, seed + k for the k-th), on a thread pool
     with one BLAS thread per fit. The matrices here are small (n x n, n ~ 100): a multi-threaded

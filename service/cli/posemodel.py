@@ -16,7 +16,7 @@ from posedyn.io.cut import read_cut
 from posedyn.io.model_dir import check_model_target, load_model, save_model
 from posedyn.io.twin_file import load_twin
 from posedyn.posemodel import PoseModel, cross_validate
-from posedyn.posemodel import r2_score, table_targets
+from posedyn.posemodel import r2_score, suspect_measurements, table_targets
 from service.cli.common import console, output_file, print_json, warn_outside_workspace
 
 
@@ -54,7 +54,7 @@ def train(
     save_model(model, out)
     if cut is not None:
         write_text_atomic(out / "cut.toml", cut.read_text(encoding="utf-8"))
-    report = {"method": method.value, "n_poses": len(table.poses), "cv": {}}
+    report = {"method": method.value, "n_poses": len(table.poses), "cv": {}, "suspects": suspect_measurements(model, table)}
     if cv:
         report["cv"] = cross_validate(make, table, folds=cv, seed=seed)
     if holdout is not None:
@@ -90,6 +90,17 @@ def train(
                           "(their errors more than 2 stds rms, the fitted measurement noise included): read those stds, and what --robust draws from them, as a lower bound")
         for note in sorted(notes):
             console.print(f"note: {note} (see --json)")
+    if report["suspects"]:
+        shown = report["suspects"][:10]
+        t = Table(title=f"measurements far from what the other poses say (leave-one-pose-out; {len(report['suspects'])} beyond a 1 % familywise threshold)",
+                  title_justify="left")
+        for c in ("pose", "target", "measured", "from the others", "stds"):
+            t.add_column(c, justify="right")
+        for s in shown:
+            t.add_row(s["pose_id"], s["target"], f"{s['measured']:.4g}", f"{s['loo_predicted']:.4g}", f"{s['z']:+.1f}")
+        console.print(t)
+        console.print("note: check these tests (a mode taken for another, a bad fit) before trusting the model there; a stiffness far above the "
+                      "pose's others is a mode that hardly moves the tool that way, not a bad measurement" + (" (--json lists all)" if len(shown) < len(report["suspects"]) else ""))
 
 
 def predict(
