@@ -90,6 +90,7 @@ def fit_table(frfs, fmin_hz=None, fmax_hz=None, max_order: int = 40, modes: Opti
             if not found:
                 raise InputError("direct FRFs (h_xx, h_yy, h_zz) or the x-y matrix", got=sorted(frf.frf), file=frf.source)
         fits.append(found)
+    _check_poses(frfs)
     orientation = "abc" if any("a_deg" in f.pose for f in frfs) else "beta"
     angles = [[f.pose.get(k, 0.0) for k in (("a_deg", "b_deg", "c_deg") if orientation == "abc" else ("beta_deg",))] for f in frfs]
     poses = PoseSet(
@@ -100,6 +101,21 @@ def fit_table(frfs, fmin_hz=None, fmax_hz=None, max_order: int = 40, modes: Opti
     )
     table = ModalTable(poses=poses, std={k: v for k, v in std.items() if not np.all(np.isnan(v))}, cross=cross if has_cross else {}, source=("posedyn fit",) * len(rows["fn_hz"]), **rows)
     return table, fits
+
+
+def _check_poses(frfs) -> None:
+    """Every FRF set gives the whole pose (x_mm, y_mm, z_mm and beta_deg or a/b/c_deg, as the
+    first one does), or none does (a table of poses at the origin, by pose_id only): a pose with
+    a key left out was silently put at 0 there."""
+    given = [f for f in frfs if f.pose]
+    if not given:
+        return
+    orientation = ("a_deg", "b_deg", "c_deg") if any(k in given[0].pose for k in ("a_deg", "b_deg", "c_deg")) else ("beta_deg",)
+    for f in frfs:
+        missing = [k for k in ("x_mm", "y_mm", "z_mm") + orientation if k not in f.pose]
+        if missing:
+            raise InputError(f"the whole pose in every file ({', '.join(('x_mm', 'y_mm', 'z_mm') + orientation)}, as in {given[0].source or given[0].pose_id})",
+                             got=f"no {missing[0]}", file=f.source or None, column=missing[0])
 
 
 #: A fitted FRF that misses the measured one by more than this share of the measured peak at

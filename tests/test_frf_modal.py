@@ -146,6 +146,15 @@ def test_uff_and_csv_round_trips(tmp_path):
         ("frequency_hz,h_xx_re\n1,1e-6\n2,1e-6\n3,1e-6\n", "both h_xx_re and h_xx_im"),
         ("# quantity = mobility\n# unit = m/N\nfrequency_hz,h_xx_re,h_xx_im\n1,1,0\n2,1,0\n3,1,0\n", "unit m/s/N for mobility"),
         ("frequency_hz,h_xx_re,h_xx_im\n1,1e-6,0\n2,abc,0\n3,1e-6,0\n", "row 2 (line 3), column 'h_xx_re': expected a number"),
+        # a column twice (the second pair was another FRF: silently fitted as this one), an FRF name that is no direction pair
+        # (silently left out), a pose key that is no number (a traceback), one given twice or misspelt, a pose that is not finite
+        ("frequency_hz,h_xx_re,h_xx_im,h_xx_re,h_xx_im\n1,1,0,1,0\n2,1,0,1,0\n3,1,0,1,0\n", "line 1, column 'h_xx_re': expected each column once"),
+        ("frequency_hz,h_xx_re,h_xx_im,h_qq_re,h_qq_im\n1,1,0,1,0\n2,1,0,1,0\n3,1,0,1,0\n", "column 'h_qq_re': expected FRF names h_<response><reference>"),
+        ("# x_mm = abc\nfrequency_hz,h_xx_re,h_xx_im\n1,1,0\n2,1,0\n3,1,0\n", "line 1, column 'x_mm': expected a number, got 'abc'"),
+        ("# x_mm = 1500\n# x_mm = 1600\nfrequency_hz,h_xx_re,h_xx_im\n1,1,0\n2,1,0\n3,1,0\n", "line 2, column 'x_mm': expected each header key once (already on line 1)"),
+        ("# colour = blue\nfrequency_hz,h_xx_re,h_xx_im\n1,1,0\n2,1,0\n3,1,0\n", "line 1, column 'colour': expected a header key among"),
+        ("# y_mm = nan\nfrequency_hz,h_xx_re,h_xx_im\n1,1,0\n2,1,0\n3,1,0\n", "line 1, column 'y_mm': expected a finite number"),
+        ("frequency_hz,h_xx_re,h_xx_im\n-1,1,0\n2,1,0\n3,1,0\n", "row 1 (line 2), column 'frequency_hz': expected finite frequencies >= 0 Hz, got -1.0"),
     ],
 )
 def test_bad_frf_files_get_clear_errors(tmp_path, text, words):
@@ -259,3 +268,38 @@ def test_fit_warns_where_the_fitted_frf_misses_a_measured_peak(tmp_path, seed, m
     warnings = json.loads(result.stdout)["warnings"]
     assert has_10hz is not missed  # the case this test is about (a better identification makes it moot)
     assert (len(warnings) == 1 and "h_xx" in warnings[0] and "at 10 Hz" in warnings[0]) if missed else warnings == []
+
+
+def test_a_low_robot_mode_measured_from_1_hz_is_fitted_not_a_traceback(tmp_path):
+    """A 5 Hz mode (k 2e6 N/m, zeta 0.01) measured 1-4000 Hz at 0.5 Hz with 1 % noise: the 1-10 Hz
+    decade has 18 lines, fewer than the coefficients of its higher LSCF orders, whose singular
+    normal equations were a LinAlgError traceback (a new user's noise seed 13)."""
+    f = np.arange(1.0, 4000.0, 0.5)
+    w, wn = 2 * np.pi * f, 2 * np.pi * 5.0
+    h = (wn**2 / 2e6) / (wn**2 - w**2 + 2j * 0.01 * wn * w)
+    rng = np.random.default_rng(13)
+    h = h + 0.01 * np.abs(h) * (rng.standard_normal(len(f)) + 1j * rng.standard_normal(len(f))) / np.sqrt(2)
+    write_frf_csv(FRFSet(f, {"h_xx": h}, pose_id="R13"), tmp_path / "r13.csv")
+    result = run_cli("fit", tmp_path / "r13.csv", "--out", tmp_path / "modes.csv")
+    assert result.returncode == 0, result.stderr
+    table = read_modal_table(tmp_path / "modes.csv")
+    assert len(table) == 1 and abs(table.fn_hz[0] / 5.0 - 1) < 1e-3 and abs(table.k_n_per_m[0] / 2e6 - 1) < 0.01
+
+
+def test_fit_refuses_a_pose_given_in_part_or_two_ways(tmp_path):
+    """Files of one pose_id are merged: the same FRF in two of them, or the same pose key with two
+    values, is refused (the later file had silently won); a file that leaves out part of the pose
+    the others give is refused (it was put at 0 there)."""
+    f = np.linspace(10.0, 2000.0, 400)
+    h = 1.0 / (1e7 * (1 - (f / 500.0) ** 2 + 0.04j * f / 500.0))
+    pose = {"x_mm": 1500.0, "y_mm": 0.0, "z_mm": 800.0, "beta_deg": 0.0}
+    write_frf_csv(FRFSet(f, {"h_xx": h}, pose_id="P1", pose=pose), tmp_path / "xx.csv")
+    write_frf_csv(FRFSet(f, {"h_xx": h}, pose_id="P1", pose=pose), tmp_path / "xx_again.csv")
+    write_frf_csv(FRFSet(f, {"h_yy": h}, pose_id="P1", pose=dict(pose, x_mm=1600.0)), tmp_path / "yy_moved.csv")
+    write_frf_csv(FRFSet(f, {"h_xx": h}, pose_id="P2", pose={"x_mm": 1500.0}), tmp_path / "partial.csv")
+    for files, words in (((tmp_path / "xx.csv", tmp_path / "xx_again.csv"), "xx_again.csv, column 'h_xx': expected each FRF of pose P1 in one file"),
+                         ((tmp_path / "xx.csv", tmp_path / "yy_moved.csv"), "yy_moved.csv, column 'x_mm': expected the pose of P1 as in"),
+                         ((tmp_path / "xx.csv", tmp_path / "partial.csv"), "partial.csv, column 'y_mm': expected the whole pose in every file")):
+        result = run_cli("fit", *files, "--out", tmp_path / "modes.csv")
+        assert result.returncode == 2 and words in result.stderr, result.stderr
+        assert not (tmp_path / "modes.csv").exists()

@@ -40,7 +40,12 @@ from posedyn.io.atomic import write_text_atomic
 QUANTITIES = {"receptance": "m/N", "mobility": "m/s/N", "accelerance": "m/s^2/N"}
 UFF_ORDINATE = {"receptance": 8, "mobility": 11, "accelerance": 12}
 POSE_KEYS = ("x_mm", "y_mm", "z_mm", "beta_deg", "a_deg", "b_deg", "c_deg") + tuple(f"q{j}_deg" for j in range(1, 7))
+#: The `# key = value` lines a CSV FRF file may hold (others are refused: a misspelt pose key
+#: would silently leave the pose out).
+HEADER_KEYS = ("quantity", "unit", "pose_id") + POSE_KEYS
 DIRS = "xyz"
+#: An FRF's name: h_<response><reference>.
+FRF_NAMES = tuple(f"h_{r}{e}" for r in DIRS for e in DIRS)
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,8 +76,11 @@ class FRFSet:
 def _check_frequencies(f: np.ndarray, source: str, lines=None) -> None:
     if f.ndim != 1 or len(f) < 3:
         raise InputError("at least three frequencies", got=len(np.atleast_1d(f)), file=source or None, column="frequency_hz")
-    if not np.all(np.isfinite(f)) or np.any(f < 0):
-        raise InputError("finite frequencies >= 0 Hz", file=source or None, column="frequency_hz")
+    bad = np.flatnonzero(~np.isfinite(f) | (f < 0))
+    if len(bad):
+        i = int(bad[0])
+        raise InputError("finite frequencies >= 0 Hz", got=float(f[i]), file=source or None, row=i + 1, line=None if lines is None else lines[i + 1],
+                         column="frequency_hz")
     d = np.diff(f)
     if np.any(d <= 0):
         i = int(np.flatnonzero(d <= 0)[0]) + 1
@@ -106,15 +114,27 @@ def read_frf_csv(path: str | os.PathLike) -> FRFSet:
         raise InputError("a readable file", got=exc.strerror, file=name) from None
     except UnicodeDecodeError as exc:
         raise InputError("UTF-8 text", got=f"byte offset {exc.start}", file=name) from None
-    meta, body_lines, first_line = {}, [], None
+    meta, meta_line, body_lines, first_line = {}, {}, [], None
     for number, raw in enumerate(text.splitlines(), 1):
         stripped = raw.strip()
         if not stripped:
             continue
         if stripped.startswith("#") and first_line is None:
             key, sep, value = stripped[1:].partition("=")
-            if sep:
-                meta[key.strip()] = value.strip()
+            key = key.strip()
+            if sep:  # (a line without "=" is a comment)
+                if key not in HEADER_KEYS:
+                    raise InputError("a header key among " + ", ".join(HEADER_KEYS), got=key, file=name, line=number, column=key)
+                if key in meta:
+                    raise InputError(f"each header key once (already on line {meta_line[key]})", got=key, file=name, line=number, column=key)
+                if key in POSE_KEYS:
+                    try:
+                        number_value = float(value)
+                    except ValueError:
+                        raise InputError("a number", got=value.strip(), file=name, line=number, column=key) from None
+                    if not math.isfinite(number_value):
+                        raise InputError("a finite number", got=value.strip(), file=name, line=number, column=key)
+                meta[key], meta_line[key] = value.strip(), number
             continue
         if first_line is None:
             first_line = number
@@ -133,9 +153,14 @@ def read_frf_csv(path: str | os.PathLike) -> FRFSet:
     if "frequency_hz" not in header:
         raise InputError("a frequency_hz column", got="missing", file=name, line=line_of[0], column="frequency_hz")
     names = sorted({c[: -len(s)] for c in header for s in ("_re", "_im", "_coh") if c.endswith(s)})
-    for c in header:
+    for k, c in enumerate(header):
         if c != "frequency_hz" and not any(c.endswith(s) for s in ("_re", "_im", "_coh")):
             raise InputError("frequency_hz and <name>_re / _im / _coh columns", got=c, file=name, line=line_of[0], column=c)
+        if c in header[:k]:
+            raise InputError("each column once", got=f"{c} twice", file=name, line=line_of[0], column=c)
+    for n in names:
+        if n not in FRF_NAMES:
+            raise InputError("FRF names h_<response><reference> with directions x, y, z (h_xx, h_xy, ...)", got=n, file=name, line=line_of[0], column=n + "_re")
     for n in names:
         for part in ("_re", "_im"):
             if n + part not in header:
@@ -231,13 +256,20 @@ def read_frf_uff(path: str | os.PathLike) -> FRFSet:
             key = f"h_{DIRS[abs(int(s['rsp_dir'])) - 1]}{DIRS[abs(int(s['ref_dir'])) - 1]}"
         except (IndexError, ValueError):
             raise InputError("response and reference directions 1-3", got=(s.get("rsp_dir"), s.get("ref_dir")), file=name, row=k, column="rsp_dir") from None
+        if key in frf:
+            raise InputError("one dataset per response and reference direction", got=f"{key} twice", file=name, row=k, column="rsp_dir")
         frf[key] = to_receptance(np.asarray(s["data"], dtype=complex), f, quantity)
         for item in str(s.get("id2", "")).split(";"):
             k_, sep, v = item.partition("=")
             if sep and k_.strip() == "pose_id":
                 pose_id = v.strip()
             elif sep and k_.strip() in POSE_KEYS:
-                pose[k_.strip()] = float(v)
+                try:
+                    pose[k_.strip()] = float(v)
+                except ValueError:
+                    raise InputError("a number", got=v.strip(), file=name, row=k, column=f"id2 {k_.strip()}") from None
+                if not math.isfinite(pose[k_.strip()]):
+                    raise InputError("a finite number", got=v.strip(), file=name, row=k, column=f"id2 {k_.strip()}")
     return FRFSet(frequency_hz=f, frf=frf, pose_id=pose_id, pose=pose, source=name)
 
 

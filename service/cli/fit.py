@@ -38,6 +38,11 @@ def fit(
             base = merged[frf.pose_id]
             if not np.array_equal(base.frequency_hz, frf.frequency_hz):
                 raise InputError("the same frequencies as the other files of this pose", file=str(path), column="frequency_hz")
+            for key in set(base.frf) & set(frf.frf):
+                raise InputError(f"each FRF of pose {frf.pose_id} in one file (also in {base.source})", got=key, file=str(path), column=key)
+            for key in set(base.pose) & set(frf.pose):
+                if base.pose[key] != frf.pose[key]:
+                    raise InputError(f"the pose of {frf.pose_id} as in {base.source} ({key} = {base.pose[key]:g})", got=frf.pose[key], file=str(path), column=key)
             frf = FRFSet(base.frequency_hz, {**base.frf, **frf.frf}, {**base.coherence, **frf.coherence}, frf.pose_id, {**base.pose, **frf.pose}, frf.source)
         merged[frf.pose_id] = frf
     frfs = list(merged.values())
