@@ -5,6 +5,7 @@ tool-change`)."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 from typing import Optional
 
@@ -52,7 +53,8 @@ def fit_table(frfs, fmin_hz=None, fmax_hz=None, max_order: int = 40, modes: Opti
         f = frf.frequency_hz
         found = {}
         if all(n in frf.frf for n in ("h_xx", "h_xy", "h_yx", "h_yy")):
-            coupled, rebuilt = matrix_modal_fit(f, frf.frf, fmin_hz, fmax_hz, max_order)
+            with _named(frf, "h_xx, h_xy, h_yx, h_yy"):
+                coupled, rebuilt = matrix_modal_fit(f, frf.frf, fmin_hz, fmax_hz, max_order)
             coupled = coupled[:modes] if modes else coupled
             has_cross = True
             for m, mode in enumerate(coupled, 1):
@@ -74,7 +76,8 @@ def fit_table(frfs, fmin_hz=None, fmax_hz=None, max_order: int = 40, modes: Opti
                 name = f"h_{d}{d}"
                 if name not in frf.frf:
                     continue
-                params = direct_modal_parameters(f, frf.frf[name], fmin_hz, fmax_hz, max_order)
+                with _named(frf, name):
+                    params = direct_modal_parameters(f, frf.frf[name], fmin_hz, fmax_hz, max_order)
                 params = params[:modes] if modes else params
                 found[name] = params
                 for m, par in enumerate(params, 1):
@@ -101,6 +104,15 @@ def fit_table(frfs, fmin_hz=None, fmax_hz=None, max_order: int = 40, modes: Opti
     )
     table = ModalTable(poses=poses, std={k: v for k, v in std.items() if not np.all(np.isnan(v))}, cross=cross if has_cross else {}, source=("posedyn fit",) * len(rows["fn_hz"]), **rows)
     return table, fits
+
+
+@contextlib.contextmanager
+def _named(frf, name: str):
+    """An identification error names the file and the FRF (it read "column 'frf'", no file)."""
+    try:
+        yield
+    except InputError as exc:
+        raise InputError(exc.expected, got=exc.got, file=frf.source or None, column=name if exc.column == "frf" else exc.column) from None
 
 
 def _check_poses(frfs) -> None:

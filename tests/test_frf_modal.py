@@ -303,3 +303,16 @@ def test_fit_refuses_a_pose_given_in_part_or_two_ways(tmp_path):
         result = run_cli("fit", *files, "--out", tmp_path / "modes.csv")
         assert result.returncode == 2 and words in result.stderr, result.stderr
         assert not (tmp_path / "modes.csv").exists()
+
+
+def test_fit_options_out_of_range_are_refused_and_a_failed_fit_names_the_file_and_frf(tmp_path):
+    """--modes 0 and --fmax-hz 0 were read as "not given", --modes -1 dropped each direction's
+    highest mode; an FRF without a mode in the band read "column 'frf'" without the file."""
+    f = np.linspace(10.0, 2000.0, 400)
+    h = 1.0 / (1e7 * (1 - (f / 500.0) ** 2 + 0.04j * f / 500.0))
+    write_frf_csv(FRFSet(f, {"h_xx": h}, pose_id="P1"), tmp_path / "xx.csv")
+    for option in (("--modes", 0), ("--modes", -1), ("--fmax-hz", 0), ("--fmin-hz", -5), ("--max-order", 1)):
+        result = run_cli("fit", tmp_path / "xx.csv", "--out", tmp_path / "modes.csv", *option)
+        assert result.returncode == 2 and option[0] in result.stderr + result.stdout, (option, result.stderr)
+    result = run_cli("fit", tmp_path / "xx.csv", "--out", tmp_path / "modes.csv", "--fmin-hz", 1000, "--fmax-hz", 1100)
+    assert result.returncode == 2 and f"{tmp_path / 'xx.csv'}, column 'h_xx': expected an FRF with at least one identifiable mode" in result.stderr

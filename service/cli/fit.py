@@ -20,15 +20,17 @@ from service.cli.common import console, output_file, print_json
 def fit(
     files: list[Path] = typer.Argument(..., help="FRF files (CSV or .uff/.unv), one pose each (files with the same pose_id are merged)."),
     out: Path = typer.Option(..., "--out", help="Modal table to write (CSV)."),
-    fmin_hz: Optional[float] = typer.Option(None, "--fmin-hz"),
+    fmin_hz: Optional[float] = typer.Option(None, "--fmin-hz", min=0.0),
     fmax_hz: Optional[float] = typer.Option(None, "--fmax-hz"),
-    modes: Optional[int] = typer.Option(None, "--modes", help="Keep at most this many modes per direction (lowest first)."),
-    max_order: int = typer.Option(40, "--max-order", help="Highest model order of the stabilization diagram."),
+    modes: Optional[int] = typer.Option(None, "--modes", min=1, help="Keep at most this many modes per direction (lowest first)."),
+    max_order: int = typer.Option(40, "--max-order", min=2, help="Highest model order of the stabilization diagram."),
     plot: Optional[Path] = typer.Option(None, "--plot", help="Folder for stabilization diagrams and measured-versus-fitted FRF plots."),
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Identify modes (fn, zeta, k with their stds; the cross-coupling, without std, from an x-y FRF matrix) and write a modal table."""
     output_file(out, "--out")
+    if fmax_hz is not None and not (math.isfinite(fmax_hz) and fmax_hz > (fmin_hz or 0.0)):  # (0 read as "not given")
+        raise InputError(f"--fmax-hz above {fmin_hz or 0:g} Hz (--fmin-hz)", got=fmax_hz, column="--fmax-hz")
     if plot is not None and plot.exists() and not plot.is_dir():
         raise InputError("a folder for the plots", got="an existing file", file=str(plot), column="--plot")
     merged: dict[str, FRFSet] = {}
