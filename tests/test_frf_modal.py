@@ -316,3 +316,16 @@ def test_fit_options_out_of_range_are_refused_and_a_failed_fit_names_the_file_an
         assert result.returncode == 2 and option[0] in result.stderr + result.stdout, (option, result.stderr)
     result = run_cli("fit", tmp_path / "xx.csv", "--out", tmp_path / "modes.csv", "--fmin-hz", 1000, "--fmax-hz", 1100)
     assert result.returncode == 2 and f"{tmp_path / 'xx.csv'}, column 'h_xx': expected an FRF with at least one identifiable mode" in result.stderr
+
+
+def test_fit_warns_where_a_stiffness_is_no_tool_tips(tmp_path):
+    """Accelerance data in a file that says receptance fit to k about w^2 too small (1 N/m for a
+    1e7 N/m mode at 500 Hz): a warning asks about the quantity; the right label gives none."""
+    f = np.linspace(10.0, 2000.0, 400)
+    h = 1.0 / (1e7 * (1 - (f / 500.0) ** 2 + 0.04j * f / 500.0))
+    write_frf_csv(FRFSet(f, {"h_xx": h}, pose_id="P1"), tmp_path / "acc.csv", quantity="accelerance")
+    text = (tmp_path / "acc.csv").read_text()
+    (tmp_path / "mislabelled.csv").write_text(text.replace("accelerance", "receptance").replace("m/s^2/N", "m/N"))
+    warned = json.loads(run_cli("fit", tmp_path / "mislabelled.csv", "--out", tmp_path / "a.csv", "--json").stdout)["warnings"]
+    assert len(warned) == 1 and "softer than any milling tool tip" in warned[0] and "quantity" in warned[0]
+    assert json.loads(run_cli("fit", tmp_path / "acc.csv", "--out", tmp_path / "b.csv", "--json").stdout)["warnings"] == []
