@@ -145,9 +145,10 @@ def test_leave_one_out_residuals_match_refitting_without_the_pose():
 def test_a_misidentified_mode_is_named_and_a_clean_table_has_no_suspects(datasets, tmp_path):
     """`suspect_measurements`: seed 004's seven published positions give none; the shipped 112-pose
     campaign with one pose's y1 frequency 30 % low (a mode taken for another) names that pose and
-    target first, and `posedyn train` reports it."""
+    target first, with the true value from the other poses, and `posedyn train` reports it."""
     import dataclasses
 
+    from posedyn.io import write_modal_table
     from posedyn.posemodel import suspect_measurements
 
     seed004 = read_modal_table(datasets / "seeds/hou2023_positions.csv")
@@ -158,18 +159,17 @@ def test_a_misidentified_mode_is_named_and_a_clean_table_has_no_suspects(dataset
     fn = table.fn_hz.copy()
     fn[rows] *= 0.7
     bad = dataclasses.replace(table, fn_hz=fn)
-    suspects = suspect_measurements(PoseModel().fit(bad), bad)
-    assert (suspects[0]["pose_id"], suspects[0]["target"]) == (table.poses.pose_id[bad_pose], "y1.fn_hz")
-    assert suspects[0]["z"] < -6 and suspects[0]["measured"] == pytest.approx(fn[rows[0]])
-    assert suspects[0]["loo_predicted"] == pytest.approx(table.fn_hz[rows[0]], rel=0.02)  # what the other poses say: the true value
-    with pytest.raises(ValueError):
-        suspect_measurements(PoseModel().fit(bad), table)  # not the table it was fitted on
-    from posedyn.io import write_modal_table
-
     write_modal_table(bad, tmp_path / "bad.csv")
     result = posedyn("train", tmp_path / "bad.csv", "--cv", 0, "--out", tmp_path / "m", "--json")
     assert result.returncode == 0, result.stderr
-    assert json.loads(result.stdout)["suspects"][0] == pytest.approx(suspects[0])
+    first = json.loads(result.stdout)["suspects"][0]
+    assert (first["pose_id"], first["target"]) == (table.poses.pose_id[bad_pose], "y1.fn_hz")
+    assert first["z"] < -6 and first["measured"] == pytest.approx(fn[rows[0]])
+    assert first["loo_predicted"] == pytest.approx(table.fn_hz[rows[0]], rel=0.02)  # what the other poses say: the true value
+    model = load_model(tmp_path / "m")
+    assert suspect_measurements(model, read_modal_table(tmp_path / "bad.csv"))[0] == pytest.approx(first)
+    with pytest.raises(ValueError):
+        suspect_measurements(model, table)  # not the table it was fitted on
 
 
 def test_fits_on_one_blas_thread_reach_the_same_optimum():
