@@ -159,7 +159,8 @@ def load_model(folder: str | os.PathLike) -> PoseModel:
                 spindle_modes={d: tuple(Mode(*m) for m in ms) for d, ms in twin["spindle_modes"].items()},
             )
             robot = Robot.from_xml((folder / model.physics_["robot_urdf"]).read_text(encoding="utf-8"), model.physics_.get("robot_name", ""))
-            model.prior_model_ = PhysicsPrior(robot, params, np.array(model.physics_["stiffness_scales"]), params.robot_modes_per_direction)
+            model.prior_model_ = PhysicsPrior(robot, params, np.array(model.physics_["stiffness_scales"]), params.robot_modes_per_direction,
+                                              model.physics_.get("mode_map"))  # (absent before 2026-12-04: mode m was the twin's row m)
             model.prior_targets_ = np.array(model.physics_["prior_targets"])
             model.twin = (robot, params)
     except (KeyError, TypeError, ValueError) as exc:

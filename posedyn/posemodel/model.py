@@ -155,11 +155,12 @@ class PhysicsPrior:
     params: object
     scales: np.ndarray
     robot_modes: int
+    mode_map: dict | None = None  # {"x2": twin row, ...} (`match_twin_modes`); None: mode m is row m
 
     def log_values(self, poses: PoseSet, targets: list[str]) -> np.ndarray:
         """ln of the twin's prediction of each target at each pose (NaN where it has none)."""
         q = pose_joints(self.robot, poses)
-        return _twin_log_values(self.robot, self.params.scaled(self.scales), q, targets, self.robot_modes)
+        return _twin_log_values(self.robot, self.params.scaled(self.scales), q, targets, self.robot_modes, mode_map=self.mode_map)
 
 
 def pose_joints(robot, poses: PoseSet) -> np.ndarray:
@@ -176,20 +177,55 @@ def pose_joints(robot, poses: PoseSet) -> np.ndarray:
     return np.array(q)
 
 
-def _twin_log_values(robot, params, q: np.ndarray, targets: list[str], robot_modes: int, inertias=None) -> np.ndarray:
+def _twin_log_values(robot, params, q: np.ndarray, targets: list[str], robot_modes: int, inertias=None, mode_map: dict | None = None) -> np.ndarray:
     """`inertias`: the `pose_inertia` of every q with these params' masses (a fit of the joint
-    stiffnesses computes them once; computed here otherwise)."""
+    stiffnesses computes them once; computed here otherwise). `mode_map`: the twin row (1-based,
+    `direction_rows` order) of each table mode, "x2" -> 5 (absent: no prior); None: mode m is row m."""
     if inertias is None:
         data = robot.model.createData()
         inertias = [pose_inertia(robot, qi, params, data) for qi in q]
     out = np.full((len(q), len(targets)), np.nan)
     parsed = [parse_target(t) for t in targets]
+    rows_of = [m if mode_map is None else mode_map.get(f"{d}{m}") for d, m, _ in parsed]
     for i in range(len(q)):
         modes = modes_at(inertias[i], params)
         rows = {d: direction_rows(modes, d, robot_modes) for d in DIRECTIONS}
         for j, (d, m, param) in enumerate(parsed):
-            if m <= len(rows[d]) and param in PARAMS:
-                out[i, j] = np.log(rows[d][m - 1][PARAMS.index(param)])
+            r = rows_of[j]
+            if r is not None and r <= len(rows[d]) and param in PARAMS:
+                out[i, j] = np.log(rows[d][r - 1][PARAMS.index(param)])
+    return out
+
+
+#: Which of the twin's modes is a table mode: per direction, the one-to-one pairing of table
+#: modes and twin rows (robot modes, then spindle modes) that minimises the sum of
+#: |ln fn ratio| + |ln k ratio| / 2 (medians over the training poses, before the stiffness fit;
+#: k ~ fn^2), kept where fn is within MODE_MATCH_FN and k within MODE_MATCH_K; other modes get
+#: no prior. By number alone, a table of one robot mode and the spindle per direction had the
+#: spindle (1450 Hz) paired with the twin's second robot mode (17 Hz), and predicted 1e84 N/m; by
+#: frequency alone, its 17 Hz x mode (3e6 N/m) with the twin's 17 Hz mode that hardly moves the
+#: tool in x (1.6e8 N/m, up to 1e38), where the 12.5 Hz one (2.5e6 N/m) is the one it sees.
+MODE_MATCH_FN = 2.0
+MODE_MATCH_K = 10.0
+
+
+def match_twin_modes(measured: dict, twin: dict) -> dict:
+    """{"x2": twin row (1-based), ...} for the table modes {("x", 2): (median fn, median k)} and
+    the twin's rows {"x": [(median fn, median k) of row 1, 2, ...]} (see MODE_MATCH_FN)."""
+    out = {}
+    for d in DIRECTIONS:
+        keys = sorted(m for dd, m in measured if dd == d)
+        rows = np.array(twin.get(d, []), dtype=float).reshape(-1, 2)
+        if not keys or not len(rows):
+            continue
+        table = np.array([measured[(d, m)] for m in keys], dtype=float)
+        with np.errstate(all="ignore"):
+            dfn = np.abs(np.log(table[:, None, 0] / rows[None, :, 0]))
+            dk = np.abs(np.log(table[:, None, 1] / rows[None, :, 1]))
+        cost = np.where(np.isfinite(dfn + dk), dfn + 0.5 * dk, 1e6)
+        for i, r in zip(*scipy.optimize.linear_sum_assignment(cost)):
+            if dfn[i, r] <= np.log(MODE_MATCH_FN) and dk[i, r] <= np.log(MODE_MATCH_K):
+                out[f"{d}{keys[i]}"] = int(r) + 1
     return out
 
 
@@ -264,12 +300,13 @@ class PoseModel:
             q = pose_joints(robot, poses)
         except InputError as exc:
             return np.zeros_like(logY), {"used": False, "reason": str(exc)}
-        fit_cols = [j for j, t in enumerate(self.targets_) if parse_target(t)[2] in ("fn_hz", "k_n_per_m")]
         data = robot.model.createData()
         inertias = [pose_inertia(robot, qi, params, data) for qi in q]  # the scales change the stiffnesses only
+        mode_map = match_twin_modes(*self._median_frequencies(logY, robot, params, inertias, count))
+        fit_cols = [j for j, t in enumerate(self.targets_) if parse_target(t)[2] in ("fn_hz", "k_n_per_m")]
 
         def residual(log_scale):
-            twin = _twin_log_values(robot, params.scaled(np.exp(log_scale)), q, [self.targets_[j] for j in fit_cols], count, inertias)
+            twin = _twin_log_values(robot, params.scaled(np.exp(log_scale)), q, [self.targets_[j] for j in fit_cols], count, inertias, mode_map)
             r = logY[:, fit_cols] - twin
             return np.nan_to_num(r[:, np.isfinite(twin).all(axis=0)]).ravel()
 
@@ -282,13 +319,33 @@ class PoseModel:
         result = scipy.optimize.least_squares(residual, np.zeros(6), bounds=(np.log(1 / 3), np.log(3)), diff_step=1e-4, x_scale=0.1,
                                               loss="soft_l1", f_scale=0.1)
         scales = np.exp(result.x)
-        prior_model = PhysicsPrior(robot, params, scales, count)
-        prior = _twin_log_values(robot, params.scaled(scales), q, self.targets_, count, inertias)
+        prior_model = PhysicsPrior(robot, params, scales, count, mode_map)
+        prior = _twin_log_values(robot, params.scaled(scales), q, self.targets_, count, inertias, mode_map)
         has = np.isfinite(prior).all(axis=0) & ~self.cross_
+        with np.errstate(invalid="ignore"):  # a target keeps the prior where it explains the data: no more spread with it than without
+            has &= np.std(np.where(has, logY - prior, 0.0), axis=0) <= np.std(logY, axis=0) * (1.0 + 1e-9) + 1e-12
         prior[:, ~has] = 0.0
         self.prior_targets_ = has
         self.prior_model_ = prior_model
-        return prior, {"used": True, "stiffness_scales": scales.tolist(), "targets_with_prior": int(has.sum()), "fit_converged": bool(result.success)}
+        unmatched = sorted({f"{d}{m}" for d, m, _ in map(parse_target, self.targets_)} - set(mode_map))
+        unexplained = [t for t, h, c in zip(self.targets_, has, self.cross_) if not h and not c and f"{parse_target(t)[0]}{parse_target(t)[1]}" in mode_map]
+        info = {"used": True, "stiffness_scales": scales.tolist(), "targets_with_prior": int(has.sum()), "fit_converged": bool(result.success),
+                "mode_map": mode_map}
+        if unmatched:
+            info["modes_without_prior"] = unmatched
+        if unexplained:  # matched, but the twin's values vary more over the poses than the data (a mode shape that turns away from the direction)
+            info["targets_without_prior"] = unexplained
+        return prior, info
+
+    def _median_frequencies(self, logY: np.ndarray, robot, params, inertias, count: int):
+        """({(d, m): the table mode's median (fn, k)}, {d: [the twin row's median (fn, k), ...]})
+        over the training poses (`match_twin_modes`' input)."""
+        median = {t: float(np.exp(np.median(logY[:, j]))) for j, t in enumerate(self.targets_)}
+        measured = {(d, m): (median[target_name(d, m, "fn_hz")], median[target_name(d, m, "k_n_per_m")])
+                    for d, m, param in map(parse_target, self.targets_) if param == "fn_hz"}
+        all_modes = [modes_at(inertia, params) for inertia in inertias]
+        twin = {d: np.median([[r[0::2] for r in direction_rows(modes, d, count)] for modes in all_modes], axis=0).tolist() for d in DIRECTIONS}
+        return measured, twin
 
     def observation_noise_std(self) -> np.ndarray:
         """The fitted observation noise std of every target in model space (T,): a measurement is

@@ -67,13 +67,20 @@ def train(
             if t in model.targets_
         }
     if model.physics_ is not None:
-        report["physics"] = {k: v for k, v in model.physics_.items() if k in ("used", "reason", "stiffness_scales", "fit_converged")}
+        report["physics"] = {k: v for k, v in model.physics_.items() if k in ("used", "reason", "stiffness_scales", "fit_converged", "mode_map", "modes_without_prior",
+                                                                           "targets_without_prior")}
     if as_json:
         print_json(report)
         return
     console.print(f"trained {method.value} on {len(table.poses)} poses ({len(model.targets_)} targets, features {', '.join(model.features_)}); wrote {out}")
     if model.physics_ is not None:
-        console.print(f"physics prior: {model.physics_}")
+        console.print(f"physics prior: {report['physics']}")
+        if model.physics_.get("modes_without_prior"):
+            console.print(f"note: the twin has no mode within a factor 2 in frequency of {', '.join(model.physics_['modes_without_prior'])}: "
+                          "those modes are learned without the prior (as stgp)")
+        if model.physics_.get("targets_without_prior"):
+            console.print(f"note: the twin's values of {', '.join(model.physics_['targets_without_prior'])} vary more over the training poses than the "
+                          "measurements (a mode shape turning away from the direction): learned without the prior")
     if report["cv"]:
         t = Table(title=f"{cv}-fold cross-validation over poses", title_justify="left")
         for c in ("target", "R2 mean", "R2 std", "R2 pooled", "RMSE", "errors in stds (rms)"):
