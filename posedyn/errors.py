@@ -68,12 +68,16 @@ class InputError(ValueError):
             return self
         name, factor = names[self.column]
         got = self.got
-        if factor is not None:
-            got = tuple(v * factor for v in got) if isinstance(got, tuple) else got * factor if isinstance(got, (int, float)) else got
+        if factor is not None:  # (to 12 digits: -30 deg is not -29.999999999999996 after radians and back)
+            got = tuple(_round12(v * factor) for v in got) if isinstance(got, tuple) else _round12(got * factor) if isinstance(got, (int, float)) else got
         expected = self.expected
         for field, (other, _) in names.items() if in_expected else ():
             expected = expected.replace(field, other)
         return InputError(expected, got=got, file=self.file, row=self.row, line=self.line, column=name)
+
+
+def _round12(value):
+    return float(f"{value:.12g}") if isinstance(value, float) else value
 
 
 def _plain(value: Any) -> Any:

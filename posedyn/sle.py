@@ -59,9 +59,13 @@ from functools import lru_cache
 import numpy as np
 
 from posedyn.dynamics import ToolTipDynamics
-from posedyn.errors import InputError, check_choice, check_finite, check_non_negative, check_positive
+from posedyn.errors import InputError, check_choice, check_finite, check_positive
 from posedyn.stability.sdm import exponentials
 from dataclasses import replace
+
+
+#: Largest helix angle a cut may have (80 deg; end mills have 0-60).
+HELIX_LIMIT_RAD = math.radians(80.0)
 
 
 @dataclass(frozen=True)
@@ -84,7 +88,8 @@ class SleCut:
         for name in ("kt_pa", "tool_diameter_m", "axial_depth_m", "feed_per_tooth_m"):
             check_positive(name, getattr(self, name))
         check_finite("kn_pa", self.kn_pa)
-        check_non_negative("helix_rad", self.helix_rad)
+        if not 0.0 <= self.helix_rad < HELIX_LIMIT_RAD:  # tan(90 deg) is 1.6e16: no tool
+            raise InputError(f"a helix angle >= 0 and below 80 deg ({HELIX_LIMIT_RAD:.4g} rad)", got=self.helix_rad, column="helix_rad")
         check_choice("milling", self.milling, ("down", "up"))
         if not 0 < self.radial_depth_m <= self.tool_diameter_m:
             raise InputError("a radial depth in (0, tool diameter]", got=self.radial_depth_m, column="radial_depth_m")
@@ -141,6 +146,10 @@ def sle_m(dyn: ToolTipDynamics, cut: SleCut, rpm, slices: int = 20, harmonics: i
     rpm = np.atleast_1d(np.asarray(rpm, dtype=float))
     if np.any(~np.isfinite(rpm) | (rpm <= 0)):
         raise InputError("spindle speeds > 0 rpm", got=rpm.tolist()[:3], column="rpm")
+    if not (isinstance(slices, (int, np.integer)) and slices >= 1):
+        raise InputError("an integer number of axial slices >= 1", got=slices, column="slices")
+    if not math.isfinite(offset_m):
+        raise InputError("a finite path offset", got=offset_m, column="offset_m")
     coeff = _force_series(cut, slices, harmonics)
     k = np.arange(min(harmonics, len(coeff) - 1) + 1)
     weights = np.where(k == 0, 1.0, 2.0)
@@ -223,6 +232,8 @@ def sle_quasi_static_m(dyn: ToolTipDynamics, cut: SleCut, slices: int = 20) -> f
 def compensate(dyn: ToolTipDynamics, cut: SleCut, rpm: float, tolerance_m: float = 2e-6, max_iterations: int = 20, slices: int = 20, offset_m: float = 0.0):
     """Seed 001 section 2.3: command the radial depth a_(k+1) = a_0 + SLE(a_k) until the part error
     a_0 - (a_k - SLE(a_k)) is below the tolerance. Returns [(radial_depth_m, sle_m, part_error_m)]."""
+    if not (math.isfinite(tolerance_m) and tolerance_m > 0):
+        raise InputError("a tolerance > 0", got=tolerance_m, column="tolerance_m")
     target = cut.radial_depth_m
     depth = target
     history = []

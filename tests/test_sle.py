@@ -180,3 +180,22 @@ def test_sle_says_when_the_cut_chatters(tmp_path):
     assert "CHATTERS" in run_cli(*args, "--axial-depth-mm", "5", "--stability").stdout
     assert json.loads(run_cli(*args, "--axial-depth-mm", "0.3", "--stability", "--json").stdout)["stable"] is True
     assert "stable cut" in run_cli(*args, "--axial-depth-mm", "5").stdout
+
+
+def test_sle_options_out_of_range_are_refused_by_their_flags(tmp_path):
+    """--axial-slices 0 was a ZeroDivisionError traceback (-3: empty-slice warnings and a null
+    SLE); --offset-um nan printed 'SLE nan um (overcut)'; --helix-deg 90 (tan = 1.6e16) and a
+    tolerance of -1 ran; --rpm beside a range silently won."""
+    modes = tmp_path / "stiff.csv"
+    modes.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg,direction,mode,fn_hz,zeta,k_n_per_m\nS,0,0,0,0,y,1,20000,0.05,1e8\n")
+    base = ("sle", "--modes", modes, "--kt-mpa", 796, "--kn-mpa", 169, "--teeth", 3, "--tool-diameter-mm", 10, "--axial-depth-mm", 2,
+            "--feed-per-tooth-mm", 0.05, "--radial-depth-mm", 3)
+    for extra, flag in ((("--rpm", 3000, "--axial-slices", 0), "--axial-slices"), (("--rpm", 3000, "--offset-um", "nan"), "--offset-um"),
+                        (("--rpm", 3000, "--helix-deg", 90), "--helix-deg"), (("--rpm", 3000, "--helix-deg", -30), "--helix-deg"),
+                        (("compensate", "--rpm", 3000, "--tolerance-um", -1), "--tolerance-um"),
+                        (("--rpm", 3000, "--rpm-min", 1000, "--rpm-max", 2000), "--rpm")):
+        args = base[:1] + extra[:1] + base[1:] + extra[1:] if extra[0] == "compensate" else base + extra
+        result = run_cli(*args)
+        assert result.returncode == 2 and flag in result.stderr + result.stdout and "Traceback" not in result.stderr, (extra, result.stderr)
+    assert "got -30.0" in run_cli(*base, "--rpm", 3000, "--helix-deg", -30).stderr  # (not -29.999999999999996)
+    assert run_cli(*base, "--rpm", 3000, "--helix-deg", 45).returncode == 0

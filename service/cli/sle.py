@@ -18,6 +18,10 @@ from posedyn.stability import Cut, critical_lobes
 from service.cli.common import Milling, console, finite_or_none, flag_errors, print_json
 
 
+#: The SLE's fields as its flags name them (`flag_errors`).
+SLE_FLAGS = {"offset_m": ("--offset-um", 1e6), "tolerance_m": ("--tolerance-um", 1e6), "rpm": ("--rpm", None), "slices": ("--axial-slices", None)}
+
+
 def _stability(dyn: ToolTipDynamics, cut: SleCut, rpm: np.ndarray) -> np.ndarray:
     """Critical depth (m) of the SLE's cut at each speed (converged engine, straight flutes):
     the SLE is the error of a stable cut; above that depth the cut chatters and it means nothing."""
@@ -65,7 +69,7 @@ def sle(
     axial_depth_mm: Optional[float] = typer.Option(None, "--axial-depth-mm"),
     feed_per_tooth_mm: Optional[float] = typer.Option(None, "--feed-per-tooth-mm"),
     milling: Milling = typer.Option(Milling.down, "--milling"),
-    slices: int = typer.Option(20, "--axial-slices"),
+    slices: int = typer.Option(20, "--axial-slices", min=1),
     offset_um: float = typer.Option(0.0, "--offset-um", help="Robot path offset added to the SLE (seed 001 Table 2)."),
     tolerance_um: float = typer.Option(2.0, "--tolerance-um", help="compensate: stop when the part error is below this."),
     stability: bool = typer.Option(False, "--stability", help="Also whether the cut is stable at each speed (its critical depth by the converged engine: the SLE is the error of a stable cut; a second to minutes a speed, with many modes)."),
@@ -78,6 +82,8 @@ def sle(
         raise InputError("the option --" + missing[0].replace("_", "-"), got="missing", column="--" + missing[0].replace("_", "-"))
     if direction not in ("x", "y"):
         raise InputError("x or y", got=direction, column="--direction")
+    if rpm is not None and (rpm_min is not None or rpm_max is not None):
+        raise InputError("--rpm (one speed) or --rpm-min and --rpm-max (a range), not both", got="both", column="--rpm")
     dyn, cut = _inputs(modes, extra, pose_id, teeth, kt_mpa, kn_mpa, tool_diameter_mm, helix_deg, radial_depth_mm, axial_depth_mm, feed_per_tooth_mm, milling, direction)
 
     offset = offset_um * 1e-6
@@ -86,7 +92,8 @@ def sle(
     if action == "compensate":
         if rpm is None:
             raise InputError("--rpm for compensate", got="missing", column="--rpm")
-        history = compensate(dyn, cut, rpm, tolerance_um * 1e-6, slices=slices, offset_m=offset)
+        with flag_errors(SLE_FLAGS):
+            history = compensate(dyn, cut, rpm, tolerance_um * 1e-6, slices=slices, offset_m=offset)
         out = {"iterations": [{"radial_depth_mm": a * 1e3, "sle_um": e * 1e6, "part_error_um": p * 1e6} for a, e, p in history]}
         if as_json:
             print_json(out)
@@ -95,7 +102,8 @@ def sle(
                 console.print(f"{i}: radial depth {it['radial_depth_mm']:.4f} mm, SLE {it['sle_um']:.2f} um, part error {it['part_error_um']:.2f} um")
         return
     if rpm is not None:
-        value = float(sle_m(dyn, cut, rpm, slices, offset_m=offset)[0])
+        with flag_errors(SLE_FLAGS):
+            value = float(sle_m(dyn, cut, rpm, slices, offset_m=offset)[0])
         out = {"sle_um": value * 1e6}
         if stability:
             critical = float(_stability(dyn, cut, np.array([rpm]))[0])
@@ -112,7 +120,8 @@ def sle(
     if rpm_min is None or rpm_max is None or not 0 < rpm_min < rpm_max or rpm_steps < 2:
         raise InputError("--rpm, or 0 < --rpm-min < --rpm-max with --rpm-steps >= 2", column="--rpm")
     speeds = np.linspace(rpm_min, rpm_max, rpm_steps)
-    values = sle_m(dyn, cut, speeds, slices, offset_m=offset)
+    with flag_errors(SLE_FLAGS):
+        values = sle_m(dyn, cut, speeds, slices, offset_m=offset)
     out = {"rpm": speeds.tolist(), "sle_um": (values * 1e6).tolist()}
     if stability:
         stable = cut.axial_depth_m < _stability(dyn, cut, speeds)
