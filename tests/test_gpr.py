@@ -464,7 +464,7 @@ def test_a_pose_column_the_training_poses_all_share_bounds_the_workspace(dataset
     y = 300 mm, beta = 45 deg got exactly P5's prediction and its tight std, and the service
     answered it: the model never saw y or beta change. Such a column bounds the workspace within
     50 mm or 15 deg of its value, saved with the model; the service refuses beyond, schedule
-    warns, and a request that leaves the column out is not refused for it."""
+    warns; so for a pose in another orientation convention (a/b/c_deg to a beta_deg model)."""
     from posedyn.table import PoseSet
     from service.zenoh_service.engine import ScheduleEngine
     from service.zenoh_service.protocol import RequestError
@@ -480,5 +480,24 @@ def test_a_pose_column_the_training_poses_all_share_bounds_the_workspace(dataset
     engine = ScheduleEngine(tmp_path / "m", datasets / "seeds/hou2023_cut.toml")
     with pytest.raises(RequestError) as refused:
         engine.pose_set({"pose_id": "Q", "x_mm": 1400.0, "y_mm": 300.0, "z_mm": 800.0, "beta_deg": 0.0})
-    assert refused.value.code == "outside_workspace" and "pose.y_mm" in refused.value.message
-    engine.pose_set({"pose_id": "P5", "x_mm": 1400.0, "y_mm": 20.0, "z_mm": 800.0, "a_deg": 0.0, "b_deg": 0.0, "c_deg": 0.0})  # no beta: not refused for it
+    assert refused.value.code == "outside_workspace" and "y_mm = 300 outside [-50, 50]" in refused.value.message
+    engine.pose_set({"pose_id": "P5", "x_mm": 1400.0, "y_mm": 20.0, "z_mm": 800.0, "beta_deg": 0.0})  # within 50 mm of y = 0
+    with pytest.raises(RequestError) as refused:  # another orientation convention: the model knows beta only (it was answered as beta = 0)
+        engine.pose_set({"pose_id": "P5", "x_mm": 1400.0, "y_mm": 20.0, "z_mm": 800.0, "a_deg": 0.0, "b_deg": 0.0, "c_deg": 0.0})
+    assert refused.value.code == "outside_workspace" and "a_deg given, the model knows the orientation as beta_deg" in refused.value.message
+    abc = PoseSet.from_columns(("R",), {"x_mm": [1400.0], "y_mm": [0.0], "z_mm": [800.0], "a_deg": [0.0], "b_deg": [90.0], "c_deg": [0.0]})
+    assert model.outside_workspace(abc) == ["pose R: a_deg given, the model knows the orientation as beta_deg"]
+
+
+def test_train_checks_its_options_and_the_holdout_before_training(datasets, tmp_path):
+    """A missing hold-out file was found after the model was written; a feature constant over the
+    training poses or given twice, and --restarts -1, were taken; the hold-out scores showed only
+    with --json."""
+    table = datasets / "seeds/hou2023_positions.csv"
+    for args, words in ((("--holdout", tmp_path / "none.csv"), "none.csv"), (("--features", "z_mm"), "expected features that vary"),
+                        (("--features", "x_mm,x_mm"), "expected each feature once"), (("--restarts", -1), "--restarts")):
+        result = posedyn("train", table, "--cv", 0, "--out", tmp_path / "m", *args)
+        assert result.returncode == 2 and words in result.stderr + result.stdout, (args, result.stderr)
+        assert not (tmp_path / "m").exists()
+    result = posedyn("train", table, "--cv", 0, "--out", tmp_path / "m", "--holdout", table)
+    assert result.returncode == 0 and "hold-out table" in result.stdout and "x1.fn_hz" in result.stdout

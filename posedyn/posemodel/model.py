@@ -38,7 +38,7 @@ from posedyn.io import format_modal_table
 from posedyn.posemodel._gp import Predictor, fit_gps, loo_residuals
 from posedyn.robot import direction_rows, tool_pose
 from posedyn.robot.twin import modes_at, pose_inertia
-from posedyn.table import DIRECTIONS, JOINT_COLUMNS, MODAL_PARAMS, ModalTable, PoseSet, coupled_y_stiffness
+from posedyn.table import DIRECTIONS, JOINT_COLUMNS, MODAL_PARAMS, ORIENTATION_COLUMNS, ModalTable, PoseSet, coupled_y_stiffness
 from posedyn.uncertainty import ModalDistribution
 
 METHODS = ("stgp", "mtgp", "physics")
@@ -108,6 +108,12 @@ def select_features(poses: PoseSet, requested: list[str] | None) -> list[str]:
         missing = [c for c in requested if c not in columns]
         if missing:
             raise InputError("feature columns present in the table: " + ", ".join(columns), got=missing, column="--features")
+        twice = sorted({c for c in requested if requested.count(c) > 1})
+        if twice:
+            raise InputError("each feature once", got=twice, column="--features")
+        constant = [c for c in requested if np.ptp(columns[c]) == 0]
+        if constant:  # the model cannot learn from it, and the workspace would be that one value (widened)
+            raise InputError("features that vary over the training poses", got=f"{constant[0]} = {columns[constant[0]][0]:g} at every pose", column="--features")
         return list(requested)
     chosen = [c for c, v in columns.items() if c not in JOINT_COLUMNS and np.ptp(v) > 0]
     if not chosen:
@@ -422,10 +428,16 @@ class PoseModel:
 
     def outside_workspace(self, poses: PoseSet) -> list[str]:
         """One line per pose feature outside `workspace_bounds` ('pose P: x_mm = 1000 outside
-        [1050, 1950]')."""
+        [1050, 1950]'), and per pose given in another orientation convention than the training
+        poses (a/b/c_deg to a model of beta_deg poses: it had been answered as beta = 0)."""
         bounds, columns = self.workspace_bounds(), poses.numeric_columns()
-        return [f"pose {poses.pose_id[i]}: {f} = {float(columns[f][i]):g} outside [{lo:g}, {hi:g}]"
-                for i in range(len(poses)) for f, (lo, hi) in bounds.items() if f in columns and not lo <= float(columns[f][i]) <= hi]
+        out = [f"pose {poses.pose_id[i]}: {f} = {float(columns[f][i]):g} outside [{lo:g}, {hi:g}]"
+               for i in range(len(poses)) for f, (lo, hi) in bounds.items() if f in columns and not lo <= float(columns[f][i]) <= hi]
+        known = [c for c in sum(ORIENTATION_COLUMNS.values(), ()) if c in bounds]  # (none: a model saved before fixed_pose, its orientation constant)
+        foreign = [c for c in ORIENTATION_COLUMNS[poses.orientation] if c not in bounds]
+        if known and foreign:
+            out += [f"pose {poses.pose_id[i]}: {foreign[0]} given, the model knows the orientation as {', '.join(known)}" for i in range(len(poses))]
+        return out
 
     def predict_table(self, poses: PoseSet) -> ModalTable:
         """Predictions as a modal table (std_* columns hold the predictive std)."""

@@ -135,7 +135,7 @@ def warn_outside_workspace(model, pose_set: PoseSet) -> None:
     """The poses `posedyn serve` would refuse (outside the model's workspace), said on stderr (a
     command's --json output stays strict JSON)."""
     for line in model.outside_workspace(pose_set):
-        print(f"warning: {line}, the model's workspace (the training poses' range widened by a quarter, at least 50 mm or 15 deg): "
+        print(f"warning: {line} (the model's workspace: the training poses' range widened by a quarter, at least 50 mm or 15 deg): "
               "the model has not seen the dynamics there, and `posedyn serve` refuses the pose (outside_workspace)", file=sys.stderr)
 
 

@@ -6,6 +6,7 @@ from enum import Enum
 from pathlib import Path
 from typing import Optional
 
+import numpy as np
 import typer
 from rich.table import Table
 
@@ -34,7 +35,7 @@ def train(
     cv: int = typer.Option(5, "--cv", help="k-fold cross-validation over poses (0: none)."),
     holdout: Optional[Path] = typer.Option(None, "--holdout", help="External hold-out table to score."),
     seed: int = typer.Option(0, "--seed", help="Random seed (restarts, folds)."),
-    restarts: int = typer.Option(1, "--restarts", help="Seeded restarts of the hyperparameter optimisation."),
+    restarts: int = typer.Option(1, "--restarts", min=0, help="Seeded restarts of the hyperparameter optimisation (0: the default start only)."),
     twin: Optional[Path] = typer.Option(None, "--twin", help="Twin file for --method physics (default: the shipped KR R2700 twin)."),
     cut: Optional[Path] = typer.Option(None, "--cut", help="A cut file the model directory carries as its default cut (MODEL_DIR/cut.toml)."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
@@ -44,6 +45,7 @@ def train(
     if cut is not None:
         read_cut(cut)  # validate before training
     table = concat_tables([read_modal_table(f) for f in files])
+    test = read_modal_table(holdout) if holdout is not None else None  # before training: an error after it left the model written
     names = [c.strip() for c in features.split(",")] if features else None
     robot_twin = load_twin(twin) if method is Method.physics else None
 
@@ -57,8 +59,7 @@ def train(
     report = {"method": method.value, "n_poses": len(table.poses), "cv": {}, "suspects": suspect_measurements(model, table)}
     if cv:
         report["cv"] = cross_validate(make, table, folds=cv, seed=seed)
-    if holdout is not None:
-        test = read_modal_table(holdout)
+    if test is not None:
         names_h, Y = table_targets(test)
         predicted = model.predict(test.poses)
         report["holdout"] = {
@@ -97,6 +98,13 @@ def train(
                           "(their errors more than 2 stds rms, the fitted measurement noise included): read those stds, and what --robust draws from them, as a lower bound")
         for note in sorted(notes):
             console.print(f"note: {note} (see --json)")
+    if "holdout" in report:
+        t = Table(title=f"hold-out table {holdout} ({len(test.poses)} poses)", title_justify="left")
+        for c in ("target", "R2", "RMSE"):
+            t.add_column(c, justify="right")
+        for name, v in report["holdout"].items():
+            t.add_row(name, "-" if v["r2"] is None or not np.isfinite(v["r2"]) else f"{v['r2']:.4f}", f"{v['rmse']:.4g}")
+        console.print(t)
     if report["suspects"]:
         shown = report["suspects"][:10]
         t = Table(title=f"measurements far from what the other poses say (leave-one-pose-out; {len(report['suspects'])} beyond a 1 % familywise threshold)",

@@ -67,7 +67,6 @@ class ScheduleEngine:
         self.robot = self.model.twin[0] if self.model.twin is not None else None
         if self.robot is None:  # the one rule: the model's twin, else the given one, else the shipped twin
             self.robot, _ = load_twin(twin)
-        self.bounds = self.model.workspace_bounds()
         self._lock = threading.Lock()  # Pinocchio's scratch data is not shared between threads
 
     def entry(self, pose: dict, cut: dict) -> dict:
@@ -119,12 +118,9 @@ class ScheduleEngine:
             except InputError as exc:
                 raise RequestError("unreachable_pose", f"pose: no inverse kinematics solution ({exc})") from None
             poses = replace(poses, joints_deg=np.degrees(np.asarray(joints)).reshape(1, 6))
-        for feature, (lo, hi) in self.bounds.items():
-            if feature not in columns:  # a column all training poses shared: checked where given
-                continue
-            value = float(columns[feature][0])
-            if not lo <= value <= hi:
-                raise RequestError("outside_workspace", f"pose.{feature}: expected within [{lo:g}, {hi:g}] (the training poses' range widened by a quarter, at least 50 mm or 15 deg), got {value:g}")
+        outside = self.model.outside_workspace(poses)  # (a column all training poses shared: checked where given)
+        if outside:
+            raise RequestError("outside_workspace", f"{outside[0]} (the model's workspace: the training poses' range widened by a quarter, at least 50 mm or 15 deg)")
         return poses
 
 
