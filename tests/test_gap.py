@@ -156,10 +156,24 @@ def test_gap_cli_contract_and_report(tmp_path):
 
 
 def test_bad_measurement_file_names_row_and_column(tmp_path):
+    """A bad cell, a negative stiffness and a pasted copy of a row (it counted twice) in a
+    measurement file; a non-finite, out-of-range or repeated parameter to hide (NaN rows were
+    written, then refused by gap)."""
     bad = tmp_path / "bad.csv"
     bad.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg,quantity,direction,mode,value,std\np,1400,0,600,0,fn_hz,x,1,13.2,0.05\np,1400,0,600,0,fn_hz,x,1,abc,0.05\n")
     out = run_cli("gap", "--measured", str(bad), "--twin", "--out", str(tmp_path / "o"))
     assert out.returncode == 2 and "bad.csv" in out.stderr and "row 2" in out.stderr and "value" in out.stderr
+    header = "pose_id,x_mm,y_mm,z_mm,beta_deg,quantity,direction,mode,value,std\n"
+    row = "p,1400,0,600,0,fn_hz,x,1,13.2,0.05\n"
+    for text, words in ((header + row + "p,1400,0,600,0,k_n_per_m,x,1,-5,0.05\n", "row 2 (line 3), column 'value': expected a k_n_per_m > 0, got '-5'"),
+                        (header + row + row, "row 2 (line 3), column 'value': expected each measurement once (row 2 repeats row 1)")):
+        bad.write_text(text)
+        out = run_cli("gap", "--measured", str(bad), "--twin", "--out", str(tmp_path / "o"))
+        assert out.returncode == 2 and words in out.stderr, out.stderr
+    for hide, words in (("mrf_temperature_drift:modulus_drop_per_mk=nan,reference_c=25", "within [-50, 50]"), ("device_mass:mass_kg=-7", "within [0, 200]"),
+                        ("mrf_temperature_drift:modulus_drop_per_mk=3,reference_c=25,reference_c=30", "reference_c twice")):
+        out = run_cli("gap-campaign", "--cut", ROOT / "datasets/seeds/hou2023_cut.toml", "--out", tmp_path / "c.csv", "--hide", hide)
+        assert out.returncode == 2 and words in out.stderr and not (tmp_path / "c.csv").exists(), out.stderr
 
 
 def test_named_fluid_effects_are_written_into_the_absorber_file_and_reproduce_the_fit(baseline, tmp_path):

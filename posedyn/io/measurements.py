@@ -27,6 +27,8 @@ QUANTITIES = ("fn_hz", "k_n_per_m", "k_xy_n_per_m", "critical_depth_mm", "absorb
 #: Relative std used when a row has none (k_xy and sle_um: relative to nothing, so it must be given).
 DEFAULT_STD = {"fn_hz": 0.003, "k_n_per_m": 0.03, "critical_depth_mm": 0.03, "absorber_fn_hz": 0.005, "absorber_zeta": 0.05}
 TEXT = ("pose_id", "quantity", "direction")
+#: Quantities that are positive by nature (k_xy and sle_um are signed).
+POSITIVE = ("fn_hz", "k_n_per_m", "critical_depth_mm", "absorber_fn_hz", "absorber_zeta")
 REQUIRED = ("pose_id", "x_mm", "y_mm", "z_mm", "quantity", "value")
 
 
@@ -47,8 +49,13 @@ def read_measurements(path: str | os.PathLike) -> Measurements:
         raise InputError("at least one measurement row", got=0, **where)
     numeric = [c for c in header if c not in TEXT]
     columns = {c: np.full(len(rows), np.nan) for c in numeric}
+    seen = {}
     for i, row in enumerate(rows, 1):
         line = i + 1
+        key = tuple((row.get(c) or "").strip() for c in header)
+        if key in seen:  # a pasted copy would count as a second measurement
+            raise InputError(f"each measurement once (row {i} repeats row {seen[key]})", got=row.get("quantity"), row=i, line=line, column="value", **where)
+        seen[key] = i
         q = row["quantity"]
         if q not in QUANTITIES:
             raise InputError("a quantity among " + ", ".join(QUANTITIES), got=q, row=i, line=line, column="quantity", **where)
@@ -66,6 +73,8 @@ def read_measurements(path: str | os.PathLike) -> Measurements:
         for c in ("x_mm", "y_mm", "z_mm", "value"):
             if not np.isfinite(columns[c][i - 1]):
                 raise InputError("a number", got=row.get(c), row=i, line=line, column=c, **where)
+        if q in POSITIVE and not columns["value"][i - 1] > 0:
+            raise InputError(f"a {q} > 0", got=row.get("value"), row=i, line=line, column="value", **where)
         if q in ("fn_hz", "k_n_per_m") and (row.get("direction") not in ("x", "y", "z") or not np.isfinite(columns.get("mode", np.array([np.nan] * len(rows)))[i - 1])):
             raise InputError("direction x|y|z and a mode number for a modal quantity", got=(row.get("direction"), row.get("mode")), row=i, line=line, column="direction", **where)
         if q == "sle_um" and row.get("direction") not in ("x", "y"):

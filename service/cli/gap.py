@@ -211,7 +211,8 @@ def gap_campaign(
     """A synthetic measurement campaign from the twin with named effects hidden in it (for trying and testing `posedyn gap`)."""
     if list_effects:
         for e in LIBRARY.values():
-            console.print(escape(f"{e.name}: {', '.join(p.name for p in e.parameters)}; acts on {', '.join(e.quantities)} through {', '.join(e.depends_on)}: {e.description} [{e.source}]"))
+            through = f"through {', '.join(e.depends_on)}" if e.depends_on else "alike at every condition"
+            console.print(escape(f"{e.name}: {', '.join(p.name for p in e.parameters)}; acts on {', '.join(e.quantities)} {through}: {e.description} [{e.source}]"))
         return
     if out is None:
         raise InputError("--out FILE.csv", column="--out")
@@ -221,13 +222,21 @@ def gap_campaign(
         name, _, rest = text.partition(":")
         if name not in LIBRARY:
             raise InputError("an effect among " + ", ".join(LIBRARY), got=name, column="--hide")
+        if name in hidden:
+            raise InputError("each effect hidden once", got=f"{name} twice", column="--hide")
+        ranges = {p.name: (p.lower, p.upper) for p in LIBRARY[name].parameters}
         params = {}
         for item in filter(None, rest.split(",")):
-            key, sep, value = item.partition("=")
+            key, sep, value = (part.strip() for part in item.partition("="))
             try:
-                params[key.strip()] = float(value)
+                number = float(value)
             except ValueError:
                 raise InputError("NAME:parameter=number", got=text, column="--hide") from None
+            if key in params:
+                raise InputError(f"each parameter of {name} once", got=f"{key} twice", column="--hide")
+            if key in ranges and not ranges[key][0] <= number <= ranges[key][1]:  # (NaN too): what posedyn gap searches, and physical
+                raise InputError(f"{name}:{key} within [{ranges[key][0]:g}, {ranges[key][1]:g}] (the range posedyn gap searches)", got=value, column="--hide")
+            params[key] = number
         expected = [p.name for p in LIBRARY[name].parameters]
         if sorted(params) != sorted(expected):
             raise InputError(f"the parameters {expected} for {name}", got=sorted(params), column="--hide")
