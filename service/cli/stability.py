@@ -37,11 +37,15 @@ IMMERSION = typer.Option(..., "--radial-immersion", help="Radial immersion a_e /
 MILLING = typer.Option(Milling.down, "--milling", help="down or up milling.")
 FEED_ANGLE = typer.Option(0.0, "--feed-angle-deg", help="Feed direction measured from the table's x axis towards y.")
 STEPS = typer.Option(None, "--steps", min=4, help="Expert override: semi-discretization with this many steps per delay instead of the converged engine (its error is not estimated).")
+#: Members of the chatter family the table shows (largest first; --json has all).
+FAMILY_SHOWN = 8
 ORDER = typer.Option(0, "--order", help="With --steps: 0 zeroth order (seed 004, weights 1/2), 1 first order.")
 JSON = typer.Option(False, "--json", help="Print JSON.")
 
 
 def _setup(modes: Path, pose_id, teeth, kt_mpa, kn_mpa, radial_immersion, milling, feed_angle_deg, steps, order):
+    if order != 0 and steps is None:  # (it was ignored: the converged engine has no order)
+        raise InputError("--order with --steps (the semi-discretization override)", got=f"--order {order} alone", column="--order")
     table = read_modal_table(modes)
     try:
         dyn = ToolTipDynamics.from_table(table, pose_id)
@@ -115,7 +119,9 @@ def chatter(
     table.add_row("critical depth", ("could not be computed" if unknown else "never chatters") if depth is None else f"{depth:.4g} mm")
     if out["dominant_chatter_hz"] is not None:
         table.add_row("dominant chatter frequency", f"{out['dominant_chatter_hz']:.4g} Hz")
-        table.add_row("chatter family", ", ".join(f"{f:.4g} ({a:.0%})" for f, a in family) + " Hz")
+        shown = family[:FAMILY_SHOWN]  # (at 200 rpm, one tooth, a/D 0.02: 550 members above 5 %)
+        table.add_row("chatter family", ", ".join(f"{f:.4g} ({a:.0%})" for f, a in shown) + " Hz"
+                      + (f" and {len(family) - len(shown)} more (--json)" if len(family) > len(shown) else ""))
     if steps is None:
         state = f"within {100 * result.rel_error_estimate:.2g} % (estimated)" if result.converged else f"NOT converged (estimated error {100 * result.rel_error_estimate:.2g} %)"
         table.add_row("accuracy", state)

@@ -15,7 +15,7 @@ from posedyn.dynamics import ToolTipDynamics
 from posedyn.io import write_modal_table
 from posedyn.io.tool_file import read_tool
 from posedyn.tool_change import tool_changed_table
-from service.cli.common import console, modal_table_for, output_file, print_json
+from service.cli.common import console, flag_errors, modal_table_for, output_file, print_json
 
 
 def tool_change(
@@ -26,14 +26,15 @@ def tool_change(
     poses: Path = typer.Option(..., "--poses", help="Poses (CSV with the pose columns)."),
     out: Path = typer.Option(..., "--out", help="Modal table of the target tool to write (CSV, with the x-y cross stiffnesses)."),
     pivot_mm: float = typer.Option(150.0, "--pivot-mm", help="Where the holder side turns, behind the holder face (the joint's rotation is not in tip-only data: see the README)."),
-    max_order: int = typer.Option(40, "--max-order", help="Highest model order of the identification's stabilization diagram."),
+    max_order: int = typer.Option(40, "--max-order", min=2, help="Highest model order of the identification's stabilization diagram."),
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Predict another tool's tip modes from the reference tool's, pose by pose (RCSA with cross terms)."""
     output_file(out, "--out")
     table = modal_table_for(model_dir, modes, poses)
     reference, target = read_tool(reference_tool), read_tool(target_tool)
-    predicted = tool_changed_table(table, reference, target, pivot_mm * 1e-3, max_order)
+    with flag_errors({"pivot_m": ("--pivot-mm", 1e3)}):
+        predicted = tool_changed_table(table, reference, target, pivot_mm * 1e-3, max_order)
     write_modal_table(predicted, out)
     summary = []
     for p, pose_id in enumerate(table.poses.pose_id):
