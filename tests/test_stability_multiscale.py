@@ -483,3 +483,30 @@ def test_cases_of_the_independent_checks_are_within_their_estimates(case, tmp_pa
     r = floquet.critical_depth(ToolTipDynamics.from_table(read_modal_table(path), "P"), cut, rpm)
     assert r.converged and r.verified
     assert abs(r.depth_m / depth_m - 1.0) <= min(0.02, max(r.rel_error_estimate, 1e-3) + bracket)
+
+
+def test_where_only_the_surface_remembers_the_last_pass_the_boundary_holds_and_the_risk_is_said():
+    """One 3 kHz mode a direction (zeta 0.02), one tooth, a/D 0.1, up milling: between cuts the
+    vibration decays by e^-6.8 at 3000 rpm and e^-68 at 300 rpm. The independent simulation
+    confirms the asymptotic boundary at 3000 rpm (decaying 5 % below, growing 5 % above); at 300
+    rpm it shows a perturbation growing 1000-fold at 30 mm, a quarter of the boundary, before it
+    decays: `free_flight_decay` gives the e-folds the chatter command warns with (a new user read
+    that growth as a boundary 4.5x too deep)."""
+    rows = [("x", 3000.0, 0.02, 5e7), ("y", 3000.0, 0.02, 5e7)]
+    dyn = ToolTipDynamics.from_modes(x=[Mode(3000.0, 0.02, 5e7)], y=[Mode(3000.0, 0.02, 5e7)])
+    cut = Cut(teeth=1, kt_pa=796e6, kn_pa=169e6, radial_immersion=0.1, milling="up")
+
+    def passes(rpm, depth_m, n):
+        r = sim.simulate(rows, 1, 796e6, 169e6, 0.1, "up", rpm, depth_m, t_sim=60.0 / rpm * n, ppp=20)
+        amplitude = np.hypot(r["x"], r["y"])
+        return np.array([amplitude[i * r["m"] : (i + 1) * r["m"]].max() for i in range(len(amplitude) // r["m"])])
+
+    fast, slow = critical_points([dyn, dyn], cut, [3000.0, 300.0])
+    assert fast.converged and slow.converged
+    below, above = passes(3000.0, 0.95 * fast.depth_m, 200), passes(3000.0, 1.05 * fast.depth_m, 200)
+    assert below[-1] < 1e-2 * below.max() and above[-1] == above.max() and above[-1] > 1e3 * above[0]
+    transient = passes(300.0, 0.030, 40)
+    assert slow.depth_m > 0.1 and transient.max() > 1e3 * transient[0] and transient[-1] < 1e-2 * transient.max()
+    efolds = 0.02 * 2 * math.pi * 3000.0 * (2 * math.pi - math.acos(1 - 2 * 0.1)) / (2 * math.pi * 300.0 / 60.0)
+    assert critical.free_flight_decay(dyn, cut, 300.0, slow.chatter_hz) == pytest.approx(efolds) and efolds > critical.SURFACE_MEMORY_EFOLDS
+    assert critical.free_flight_decay(dyn, cut, 3000.0, fast.chatter_hz) < critical.SURFACE_MEMORY_EFOLDS

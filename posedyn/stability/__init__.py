@@ -5,7 +5,9 @@ Floquet characteristic equation (`floquet`), the one entry point for user-facing
 (`critical`), time-domain check (`timesim`) and the published reference cases (`reference`)."""
 
 from posedyn.stability.batch import BatchStability
-from posedyn.stability.critical import REL_TOL, AbsoluteLimit, StabilityResult, absolute_limit, critical_lobes, critical_points
+from posedyn.stability.critical import (
+    REL_TOL, SURFACE_MEMORY_EFOLDS, AbsoluteLimit, StabilityResult, absolute_limit, critical_lobes, critical_points, free_flight_decay,
+)
 from posedyn.stability.cutting import Cut, force_matrix, interval_force_matrices, mean_force_matrix
 from posedyn.stability.model import CriticalDepths, Discretization, StabilityModel, chatter_frequencies
 
@@ -16,6 +18,8 @@ __all__ = [
     "absolute_limit",
     "critical_lobes",
     "critical_points",
+    "free_flight_decay",
+    "SURFACE_MEMORY_EFOLDS",
     "BatchStability",
     "Cut",
     "CriticalDepths",

@@ -17,7 +17,9 @@ from posedyn.dynamics import ToolTipDynamics
 from posedyn.errors import InputError
 from posedyn.io import read_modal_table
 from posedyn.io.atomic import write_text_atomic
-from posedyn.stability import Cut, Discretization, StabilityModel, StabilityResult, absolute_limit, critical_lobes, critical_points, zoa
+from posedyn.stability import (
+    SURFACE_MEMORY_EFOLDS, Cut, Discretization, StabilityModel, StabilityResult, absolute_limit, critical_lobes, critical_points, free_flight_decay, zoa,
+)
 from posedyn.stability.cutting import check_rpm
 from service.cli.common import Milling, console, finite_or_none, flag_errors, output_file, print_json
 
@@ -97,6 +99,7 @@ def chatter(
         "dominant_chatter_hz": finite_or_none(result.chatter_hz),
         "chatter_family_hz": [f for f, _ in family],
         **result.accuracy_json(),
+        "free_flight_decay_efolds": finite_or_none(free_flight_decay(model.dyn, model.cut, rpm, result.chatter_hz)),
     }
     if depth_mm is not None:
         if not np.isfinite(depth_mm) or depth_mm < 0:
@@ -131,6 +134,11 @@ def chatter(
             verdict += " by a depth that did NOT converge: not assured"
         table.add_row(f"at {depth_mm:g} mm", verdict if steps is None else f"spectral radius {out['spectral_radius']:.6f} ({verdict})")
     console.print(table)
+    efolds = out["free_flight_decay_efolds"]
+    if efolds is not None and efolds > SURFACE_MEMORY_EFOLDS:
+        console.print(f"note: between cuts the chattering mode's vibration decays by e^-{efolds:.0f}: only the surface remembers the last pass, and the "
+                      "critical depth is the asymptotic (Floquet) boundary; below it a perturbation can grow for many passes before it decays "
+                      "(300-fold at a sixth of it in the README's 300 rpm example): keep well below it")
 
 
 def lobes(
