@@ -63,6 +63,7 @@ def test_data_summary_checks_every_file_and_names_each_bad_one(tmp_path, dataset
     (tmp_path / "b_broken.csv").write_text("\n".join(broken) + "\n")
     (tmp_path / "c_no_meta.toml").write_text("[cut]\nteeth = 3\n")
     (tmp_path / "d_latin1.csv").write_bytes("pose_id,direction\nP\xe9,x\n".encode("latin-1"))
+    (tmp_path / "e_folder.csv").mkdir()  # a folder named like a table is no file (it stopped the walk)
     result = posedyn("data", "summary", tmp_path, "--json")
     assert result.returncode == 2 and "Traceback" not in result.stderr
     report = {item["file"]: item for item in json.loads(result.stdout)}

@@ -65,7 +65,7 @@ def data_summary(
     """Validate every modal table and measurement campaign (*.csv) and parameter file (*.toml) under a folder."""
     if not folder.is_dir():
         raise InputError("a folder", got=str(folder))
-    files = sorted(p for p in folder.rglob("*") if p.suffix in (".csv", ".toml"))
+    files = sorted(p for p in folder.rglob("*") if p.suffix in (".csv", ".toml") and not p.is_dir())  # (a folder named x.csv stopped the walk)
     if not files:
         raise InputError("at least one .csv or .toml file", got="none", file=str(folder))
     report, errors = [], []
@@ -91,6 +91,8 @@ def _file_summary(path: Path) -> dict:
         header = path.read_text(encoding="utf-8-sig").partition("\n")[0]
     except UnicodeDecodeError as exc:
         raise InputError("a UTF-8 text file", got=f"byte {exc.object[exc.start]:#04x} at offset {exc.start}", file=str(path)) from None
+    except OSError as exc:  # unreadable (permissions, a broken link): listed as invalid, the walk goes on
+        raise InputError("a readable file", got=exc.strerror, file=str(path)) from None
     if path.suffix == ".csv" and "quantity" in header.split(","):
         m = read_measurements(path)  # a measurement campaign for `posedyn gap` (README: Measurement campaigns)
         quantities = {str(q): int(n) for q, n in zip(*np.unique(m.quantity, return_counts=True))}
