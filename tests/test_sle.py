@@ -180,6 +180,10 @@ def test_sle_says_when_the_cut_chatters(tmp_path):
     assert "CHATTERS" in run_cli(*args, "--axial-depth-mm", "5", "--stability").stdout
     assert json.loads(run_cli(*args, "--axial-depth-mm", "0.3", "--stability", "--json").stdout)["stable"] is True
     assert "stable cut" in run_cli(*args, "--axial-depth-mm", "5").stdout
+    ranged = [a for a in args if a not in ("--rpm", "600")] + ["--rpm-min", "600", "--rpm-max", "610", "--rpm-steps", "2", "--axial-depth-mm", "5", "--stability"]
+    out = json.loads(run_cli(*ranged, "--json").stdout)  # per speed as at one speed (the critical depths were left out)
+    assert out["stable"] == [False, False] and out["critical_depth_mm"][0] == pytest.approx(0.4263, rel=0.02)
+    assert "SLE from" not in run_cli(*ranged).stdout  # no range of SLEs where none applies
 
 
 def test_sle_options_out_of_range_are_refused_by_their_flags(tmp_path):

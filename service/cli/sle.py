@@ -124,12 +124,16 @@ def sle(
         values = sle_m(dyn, cut, speeds, slices, offset_m=offset)
     out = {"rpm": speeds.tolist(), "sle_um": (values * 1e6).tolist()}
     if stability:
-        stable = cut.axial_depth_m < _stability(dyn, cut, speeds)
+        critical = _stability(dyn, cut, speeds)
+        stable = cut.axial_depth_m < critical
+        out["critical_depth_mm"] = [finite_or_none(d * 1e3) for d in critical]  # (the README's promise, as at one speed)
         out["stable"] = stable.tolist()
     if as_json:
         print_json(out)
         return
-    console.print(f"SLE from {values.min() * 1e6:.2f} to {values.max() * 1e6:.2f} um over {rpm_min:g}-{rpm_max:g} rpm")
+    counted = values if not stability else values[stable]  # the SLE of the stable speeds only: a chattering cut has none
+    if len(counted):
+        console.print(f"SLE from {counted.min() * 1e6:.2f} to {counted.max() * 1e6:.2f} um over {rpm_min:g}-{rpm_max:g} rpm" + (" (stable speeds)" if stability else ""))
     if not stability:
         console.print("  (the SLE of a stable cut: --stability checks that the cut does not chatter)")
     elif not stable.all():
