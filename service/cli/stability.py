@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import tempfile
+import time
 from enum import Enum
 from pathlib import Path
 from typing import Optional
@@ -141,6 +143,25 @@ def chatter(
                       "(300-fold at a sixth of it in the README's 300 rpm example): keep well below it")
 
 
+#: Speeds a lobe diagram computes between progress lines on a terminal (`_lobes_with_progress`).
+PROGRESS_SPEEDS = 25
+
+
+def _lobes_with_progress(model, rpm: np.ndarray, workers: int) -> list:
+    """`critical_lobes`, and on a terminal a line on stderr after each PROGRESS_SPEEDS speeds
+    (low speeds with kHz modes take seconds a speed: 200 of them ran 8-12 min in silence);
+    piped or captured, all at once."""
+    if not sys.stderr.isatty() or len(rpm) <= PROGRESS_SPEEDS:
+        return critical_lobes(model.dyn, model.cut, rpm, workers=workers)
+    results, start = [], time.monotonic()
+    for lo in range(0, len(rpm), PROGRESS_SPEEDS):
+        results += critical_lobes(model.dyn, model.cut, rpm[lo : lo + PROGRESS_SPEEDS], workers=workers)
+        done, spent = len(results), time.monotonic() - start
+        print(f"lobes: {done} of {len(rpm)} speeds, {spent:.0f} s" + (f", about {spent / done * (len(rpm) - done):.0f} s to go" if done < len(rpm) else ""),
+              file=sys.stderr, flush=True)
+    return results
+
+
 def lobes(
     modes: Path = MODES,
     pose_id: Optional[str] = POSE,
@@ -178,7 +199,7 @@ def lobes(
     rpm = np.linspace(rpm_min, rpm_max, rpm_steps)
     converged = None
     if method is Method.floquet:
-        results = critical_lobes(model.dyn, model.cut, rpm, workers=workers)
+        results = _lobes_with_progress(model, rpm, workers)
         depth = np.array([r.depth_m for r in results])
         converged = [r.converged for r in results]
         limit = absolute_limit(model.dyn, model.cut, depth)
