@@ -23,7 +23,6 @@ app = typer.Typer(
     help="Pose-dependent tool-tip dynamics, chatter prediction and absorber/controller schedules for robotic milling.",
     no_args_is_help=True,
     pretty_exceptions_enable=False,
-    rich_markup_mode=None,  # help text is plain: "[sle]" or "[host]" is a TOML section, not rich markup (it vanished)
     add_completion=False,
 )
 app.add_typer(data.app, name="data")

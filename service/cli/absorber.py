@@ -26,7 +26,7 @@ from posedyn.io import read_pose_table
 from posedyn.stability import Cut, mean_force_matrix
 from service.cli.common import Milling, console, finite_or_none, flag_errors, modal_input_for, output_file, print_json, resolve_cut, twin_modes_at
 
-app = typer.Typer(help="MRF absorber: optimal tuning, field for a target frequency.", no_args_is_help=True, rich_markup_mode=None)  # plain help, as the main app (service.cli)
+app = typer.Typer(help="MRF absorber: optimal tuning, field for a target frequency.", no_args_is_help=True)
 
 
 class Layout(str, Enum):
@@ -94,7 +94,7 @@ def tune(
 
 @app.command("robust")
 def robust(
-    host_file: Path = typer.Option(..., "--host", help="Host file: [host], [cut], optional [uncertainty] and [absorber] mass_ratio (as datasets/seeds/dogan2024_host_milling.toml)."),
+    host_file: Path = typer.Option(..., "--host", help="Host file: \\[host], \\[cut], optional \\[uncertainty] and \\[absorber] mass_ratio (as datasets/seeds/dogan2024_host_milling.toml)."),
     layout: Optional[Layout] = typer.Option(None, "--layout", help="Absorber tuned (seed 002 eq. 18) for the nominal host; none: the bare host."),
     mass_ratio: Optional[float] = typer.Option(None, "--mass-ratio", help="Absorber mass / host modal mass (default: the host file's)."),
     rpm_min: float = typer.Option(..., "--rpm-min"),

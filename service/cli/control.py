@@ -13,7 +13,7 @@ from absorber.active_damping import control_entries
 from absorber.files import read_actuator
 from service.cli.common import console, modal_table_for, print_json
 
-app = typer.Typer(help="Active damping: DVF gain schedules and virtual absorbers.", no_args_is_help=True, rich_markup_mode=None)  # plain help, as the main app (service.cli)
+app = typer.Typer(help="Active damping: DVF gain schedules and virtual absorbers.", no_args_is_help=True)
 
 
 @app.command("schedule")

@@ -15,7 +15,7 @@ from posedyn.io.measurements import read_measurements
 from posedyn.io.shipped import DATASETS
 from service.cli.common import console, print_json
 
-app = typer.Typer(help="Validate and summarise modal-test tables and parameter files.", no_args_is_help=True, rich_markup_mode=None)  # plain help, as the main app (service.cli)
+app = typer.Typer(help="Validate and summarise modal-test tables and parameter files.", no_args_is_help=True)
 out = console
 
 

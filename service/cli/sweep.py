@@ -24,7 +24,7 @@ def sweep(
     model_dir: Optional[Path] = typer.Argument(None, help="Model directory (or give --twin)."),
     twin: Optional[Path] = typer.Option(None, "--twin", help="Robot twin file instead of a model (modes from the twin, no uncertainty)."),
     grid: Path = typer.Option(..., "--grid", help="Pose grid (TOML) or pose list / tool path (CSV with the pose columns)."),
-    cut: Optional[Path] = typer.Option(None, "--cut", help="Cut file (TOML; default: MODEL_DIR/cut.toml); an [sle] section adds the surface-location-error map."),
+    cut: Optional[Path] = typer.Option(None, "--cut", help="Cut file (TOML; default: MODEL_DIR/cut.toml); an \\[sle] section adds the surface-location-error map."),
     absorber: Optional[Path] = typer.Option(None, "--absorber", help="Absorber file (default: seed 004's design)."),
     actuator: Optional[Path] = typer.Option(None, "--actuator", help="Actuator file (default: seed 000's)."),
     out: Path = typer.Option(..., "--out", help="Output directory: chunks/, results.csv, results.parquet, report.html."),

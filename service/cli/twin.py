@@ -18,7 +18,7 @@ from posedyn.robot.campaign import GridPose, Noise, generate_campaign, pose_mode
 from posedyn.robot.twin_effects import parse_effect
 from service.cli.common import console, flag_errors, output_file, print_json
 
-app = typer.Typer(help="The robot twin: modes at a pose, synthetic modal-test campaigns.", no_args_is_help=True, rich_markup_mode=None)  # plain help, as the main app (service.cli)
+app = typer.Typer(help="The robot twin: modes at a pose, synthetic modal-test campaigns.", no_args_is_help=True)
 EFFECT = typer.Option(None, "--effect", help="Hide a named effect, e.g. device_mass:mass_kg=8 (repeatable).")
 
 
