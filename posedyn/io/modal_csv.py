@@ -416,17 +416,16 @@ def parse_pose_table(text: str, source: str) -> PoseSet:
             raise InputError("pose columns only (pose_id, x_mm, y_mm, z_mm, beta_deg or a/b/c_deg, q1..q6_deg)", got=name, file=source, line=1, column=name)
     # reuse the modal-table checks by giving every pose a placeholder mode row
     lines = [",".join(header + ["direction", "mode", "fn_hz", "zeta", "k_n_per_m"])]
-    for cells in reader:
+    first_row: dict[str, int] = {}
+    for line_number, cells in enumerate(reader, 2):
         if any(c.strip() for c in cells):
+            pose_id = cells[header.index("pose_id")].strip() if "pose_id" in header and len(cells) > header.index("pose_id") else None
+            if pose_id in first_row:  # (the placeholder mode below would name it 'P5/x/1')
+                raise InputError(f"one row per pose_id (already in row {first_row[pose_id]})", got=pose_id, file=source, row=len(lines), line=line_number, column="pose_id")
+            if pose_id is not None:
+                first_row[pose_id] = len(lines)
             lines.append(",".join(_quote(c) for c in cells) + ",x,1,1,0.5,1")
-    try:
-        return parse_modal_table("\n".join(lines) + "\n", source).poses
-    except InputError as exc:
-        if exc.column != "mode":
-            raise
-        # the placeholder mode repeated: the pose_id (the placeholder's direction and mode are no column of a pose list)
-        already = exc.expected[exc.expected.find("(already") :]
-        raise InputError(f"one row per pose_id {already}".strip(), got=str(exc.got).split("/")[0], file=source, row=exc.row, line=exc.line, column="pose_id") from None
+    return parse_modal_table("\n".join(lines) + "\n", source).poses
 
 
 def _quote(cell: str) -> str:
