@@ -308,7 +308,7 @@ class PoseModel:
             return np.zeros_like(logY), {"used": False, "reason": str(exc)}
         data = robot.model.createData()
         inertias = [pose_inertia(robot, qi, params, data) for qi in q]  # the scales change the stiffnesses only
-        mode_map = match_twin_modes(*self._median_frequencies(logY, robot, params, inertias, count))
+        mode_map = match_twin_modes(*self._median_modes(logY, robot, params, inertias, count))
         fit_cols = [j for j, t in enumerate(self.targets_) if parse_target(t)[2] in ("fn_hz", "k_n_per_m")]
 
         def residual(log_scale):
@@ -343,7 +343,7 @@ class PoseModel:
             info["targets_without_prior"] = unexplained
         return prior, info
 
-    def _median_frequencies(self, logY: np.ndarray, robot, params, inertias, count: int):
+    def _median_modes(self, logY: np.ndarray, robot, params, inertias, count: int):
         """({(d, m): the table mode's median (fn, k)}, {d: [the twin row's median (fn, k), ...]})
         over the training poses (`match_twin_modes`' input)."""
         median = {t: float(np.exp(np.median(logY[:, j]))) for j, t in enumerate(self.targets_)}
@@ -559,9 +559,9 @@ def suspect_measurements(model: PoseModel, table: ModalTable, familywise: float 
     leave-one-pose-out residual of every target (`loo_residuals`, at the fitted hyperparameters,
     in model space, the fitted noise included) beyond the Bonferroni threshold
     z* = Phi^-1(1 - familywise / (2 N)) over all N = poses x targets values (4.6 stds for 112
-    poses and 24 targets, 3.7 for 7 and 6). A mode misidentified at one pose (fn 13 % off among 112
-    poses) shows there; so does a stiffness in a direction the mode hardly moves (heavy-tailed,
-    not wrong). `table`: the one the model was fitted on. Largest |z| first: [{pose_id, target,
+    poses and 24 targets, 3.7 for 7 and 6). A mode misidentified at one pose (fn 30 % low among
+    112 poses: -9 stds) shows there; so does a stiffness in a direction the mode hardly moves
+    (heavy-tailed, not wrong). `table`: the one the model was fitted on. Largest |z| first: [{pose_id, target,
     measured, loo_predicted (original units), z}, ...]."""
     if training_hash(table) != model.training_hash_:
         raise ValueError("the table the model was fitted on (its training_data_hash differs)")

@@ -121,10 +121,10 @@ def free_flight_decay(dyn: ToolTipDynamics, cut: Cut, rpm: float, chatter_hz: fl
     The critical depth (the linear delay equation's Floquet boundary) is still exact, but below
     it perturbations can grow for many passes before they decay. Measured with the tests'
     independent time-domain simulation (one 3 kHz mode a direction, zeta 0.02, one tooth, a/D
-    0.1, up milling; boundary 132 / 117 / 92 mm at 300 / 1000 / 3000 rpm, confirmed there at 1000
-    and 3000 rpm: decaying at 110 and 90 mm, growing at 125 and 100 mm): at 300 rpm (68 e-folds) a perturbation grew
-    300-fold at 20 mm, 1e5 at 30 mm and 1e12 at 60 mm before it decayed; at 3000 rpm (6.8) at
-    most 34-fold at 90 mm."""
+    0.1, up milling; boundary 132 / 117 / 92 mm at 300 / 1000 / 3000 rpm, confirmed at 1000 and
+    3000 rpm: decaying at 110 and 90 mm, growing at 125 and 100 mm): at 300 rpm (68 e-folds) a
+    perturbation grew 300-fold at 20 mm, 1e5 at 30 mm and 1e12 at 60 mm before it decayed; at
+    3000 rpm (6.8) at most 34-fold at 90 mm."""
     if not math.isfinite(chatter_hz) or chatter_hz <= 0:
         return math.nan
     start, exit_ = cut.engagement_rad
