@@ -94,7 +94,9 @@ def test_two_methods_agree_on_the_spindle_modes():
 def test_the_override_says_it_is_not_estimated():
     result = critical_points([structure(TABLE)], CUT, 2000.0, steps=40)[0]
     assert result.method == "sdm" and result.converged is None and math.isnan(result.rel_error_estimate)
-    assert result.accuracy_json() == {"method": "sdm", "converged": None, "rel_error_estimate": None, "steps": 40}
+    accuracy = result.accuracy_json()
+    assert 0 < accuracy.pop("free_flight_decay_efolds") < critical.SURFACE_MEMORY_EFOLDS  # (2000 rpm, 3 teeth, a/D 0.5)
+    assert accuracy == {"method": "sdm", "converged": None, "rel_error_estimate": None, "steps": 40}
 
 
 def test_a_hard_case_once_missed_is_now_found():
@@ -510,3 +512,15 @@ def test_where_only_the_surface_remembers_the_last_pass_the_boundary_holds_and_t
     efolds = 0.02 * 2 * math.pi * 3000.0 * (2 * math.pi - math.acos(1 - 2 * 0.1)) / (2 * math.pi * 300.0 / 60.0)
     assert critical.free_flight_decay(dyn, cut, 300.0, slow.chatter_hz) == pytest.approx(efolds) and efolds > critical.SURFACE_MEMORY_EFOLDS
     assert critical.free_flight_decay(dyn, cut, 3000.0, fast.chatter_hz) < critical.SURFACE_MEMORY_EFOLDS
+    assert slow.free_flight_decay_efolds == pytest.approx(efolds) and slow.accuracy_json()["free_flight_decay_efolds"] == pytest.approx(efolds)
+
+    from types import SimpleNamespace
+
+    from service.sweep.chunk import _result_columns  # a sweep row says so (its flags)
+
+    pose = SimpleNamespace(rows=(("x", 1, 3000.0, 0.02, 5e7, 0.0),), lowest_xy=("x", 1, 3000.0, 0.02, 5e7, 0.0))
+    absorber = SimpleNamespace(feasible=True, target_hz=3000.0, field_t=0.1, current_a=1.0)
+    for result, flagged in ((slow, True), (fast, False)):
+        entry = SimpleNamespace(pose=pose, absorber=absorber, controller=None, stability=result, stability_with_absorber=result, robust=None,
+                                critical_depth_m=result.depth_m, dominant_chatter_hz=result.chatter_hz, critical_depth_with_absorber_m=result.depth_m)
+        assert ("surface_memory" in _result_columns(entry)["flags"].split(";")) is flagged

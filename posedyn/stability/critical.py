@@ -11,6 +11,7 @@ error is not estimated (`converged` None) - at low speed with kHz modes it can b
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import multiprocessing
 import threading
@@ -45,10 +46,12 @@ class StabilityResult:
     rel_error_estimate: float  # NaN where not estimated
     steps: int | None = None  # the override's steps per delay
     family: tuple = ()  # ((hz, relative tool-tip amplitude), ...), largest first
+    free_flight_decay_efolds: float = math.nan  # `free_flight_decay` (NaN without a chatter frequency)
 
     def accuracy_json(self) -> dict:
         out = {"method": self.method, "converged": self.converged,
-               "rel_error_estimate": self.rel_error_estimate if math.isfinite(self.rel_error_estimate) else None}
+               "rel_error_estimate": self.rel_error_estimate if math.isfinite(self.rel_error_estimate) else None,
+               "free_flight_decay_efolds": self.free_flight_decay_efolds if math.isfinite(self.free_flight_decay_efolds) else None}
         if self.steps is not None:
             out["steps"] = self.steps
         return out
@@ -92,8 +95,10 @@ def critical_points(structures: list[ToolTipDynamics], cut: Cut, rpm, steps: int
         return []
     if steps is None:
         points = _floquet_points(structures, cut, rpm, verify, frequencies, continuation)
-        return [_converged_or_flagged(p, frequencies) for p in points]
-    return _sdm_points(structures, cut, rpm, steps, frequencies)
+        results = [_converged_or_flagged(p, frequencies) for p in points]
+    else:
+        results = _sdm_points(structures, cut, rpm, steps, frequencies)
+    return [dataclasses.replace(r, free_flight_decay_efolds=free_flight_decay(s, cut, float(n), r.chatter_hz)) for r, s, n in zip(results, structures, rpm)]
 
 
 def _floquet_points(structures, cut, rpm, verify, frequencies=True, continuation=False):

@@ -93,7 +93,8 @@ def chatter(
     else:
         sdm = model.critical_depths([rpm])
         family = sdm.family[0]
-        result = StabilityResult(float(sdm.depth_m[0]), float(sdm.dominant_chatter_hz[0]), "sdm", None, float("nan"), steps)
+        result = StabilityResult(float(sdm.depth_m[0]), float(sdm.dominant_chatter_hz[0]), "sdm", None, float("nan"), steps,
+                                 free_flight_decay_efolds=free_flight_decay(model.dyn, model.cut, rpm, float(sdm.dominant_chatter_hz[0])))
     out = {
         "pose_id": pose,
         "rpm": rpm,
@@ -101,7 +102,6 @@ def chatter(
         "dominant_chatter_hz": finite_or_none(result.chatter_hz),
         "chatter_family_hz": [f for f, _ in family],
         **result.accuracy_json(),
-        "free_flight_decay_efolds": finite_or_none(free_flight_decay(model.dyn, model.cut, rpm, result.chatter_hz)),
     }
     if depth_mm is not None:
         if not np.isfinite(depth_mm) or depth_mm < 0:
