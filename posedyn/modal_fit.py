@@ -42,8 +42,9 @@ def _matrix_mode_rows(mode) -> list:
     return [("x", w2 / (lx * rx), k_xy, rel_x), ("y", w2 / (ly * ry), k_yx, rel_y)]
 
 
-def fit_table(frfs, fmin_hz=None, fmax_hz=None, max_order: int = 40, modes: Optional[int] = None):
-    """A ModalTable (one pose per FRF set) and, per pose, what the fits found (for plots)."""
+def fit_table(frfs, fmin_hz=None, fmax_hz=None, max_order: int = 40, modes: Optional[int] = None, weighting: str = "relative"):
+    """A ModalTable (one pose per FRF set) and, per pose, what the fits found (for plots);
+    `weighting`: LSFD's (`identify.WEIGHTINGS`; "absolute" for computed, noise-free FRFs)."""
     rows = {k: [] for k in ("pose_index", "direction", "mode", "fn_hz", "zeta", "k_n_per_m")}
     std = {"std_fn_hz": [], "std_zeta": [], "std_k_n_per_m": []}
     cross = {"k_xy_n_per_m": [], "k_yx_n_per_m": []}
@@ -54,7 +55,7 @@ def fit_table(frfs, fmin_hz=None, fmax_hz=None, max_order: int = 40, modes: Opti
         found = {}
         if all(n in frf.frf for n in ("h_xx", "h_xy", "h_yx", "h_yy")):
             with _named(frf, "h_xx, h_xy, h_yx, h_yy"):
-                coupled, rebuilt = matrix_modal_fit(f, frf.frf, fmin_hz, fmax_hz, max_order)
+                coupled, rebuilt = matrix_modal_fit(f, frf.frf, fmin_hz, fmax_hz, max_order, weighting)
             coupled = coupled[:modes] if modes else coupled
             has_cross = True
             for m, mode in enumerate(coupled, 1):
@@ -77,7 +78,7 @@ def fit_table(frfs, fmin_hz=None, fmax_hz=None, max_order: int = 40, modes: Opti
                 if name not in frf.frf:
                     continue
                 with _named(frf, name):
-                    params = direct_modal_parameters(f, frf.frf[name], fmin_hz, fmax_hz, max_order)
+                    params = direct_modal_parameters(f, frf.frf[name], fmin_hz, fmax_hz, max_order, weighting)
                 params = params[:modes] if modes else params
                 found[name] = params
                 for m, par in enumerate(params, 1):

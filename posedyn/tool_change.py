@@ -39,4 +39,4 @@ def tool_changed_table(table: ModalTable, reference: tuple[Tool, Connection], ta
             names.update(h_xy=H[:, 0, 1], h_yx=H[:, 1, 0])
         pose = {name: float(values[p]) for name, values in columns.items()}
         frfs.append(FRFSet(omega / (2 * math.pi), names, pose_id=pose_id, pose=pose, source=f"{target[0].name} at {pose_id}"))
-    return fit_table(frfs, max_order=max_order)[0]
+    return fit_table(frfs, max_order=max_order, weighting="absolute")[0]  # computed FRFs: no noise to weigh (`identify.WEIGHTINGS`)
