@@ -192,7 +192,7 @@ def _twin_log_values(robot, params, q: np.ndarray, targets: list[str], robot_mod
         inertias = [pose_inertia(robot, qi, params, data) for qi in q]
     out = np.full((len(q), len(targets)), np.nan)
     parsed = [parse_target(t) for t in targets]
-    rows_of = [m if mode_map is None else mode_map.get(f"{d}{m}") for d, m, _ in parsed]
+    rows_of = [m if mode_map is None else mode_map.get(mode_key(d, m)) for d, m, _ in parsed]
     for i in range(len(q)):
         modes = modes_at(inertias[i], params)
         rows = {d: direction_rows(modes, d, robot_modes) for d in DIRECTIONS}
@@ -215,6 +215,11 @@ MODE_MATCH_FN = 2.0
 MODE_MATCH_K = 10.0
 
 
+def mode_key(direction: str, mode: int) -> str:
+    """A table mode as `mode_map` names it: "x2"."""
+    return f"{direction}{mode}"
+
+
 def match_twin_modes(measured: dict, twin: dict) -> dict:
     """{"x2": twin row (1-based), ...} for the table modes {("x", 2): (median fn, median k)} and
     the twin's rows {"x": [(median fn, median k) of row 1, 2, ...]} (see MODE_MATCH_FN)."""
@@ -231,7 +236,7 @@ def match_twin_modes(measured: dict, twin: dict) -> dict:
         cost = np.where(np.isfinite(dfn + dk), dfn + 0.5 * dk, 1e6)
         for i, r in zip(*scipy.optimize.linear_sum_assignment(cost)):
             if dfn[i, r] <= np.log(MODE_MATCH_FN) and dk[i, r] <= np.log(MODE_MATCH_K):
-                out[f"{d}{keys[i]}"] = int(r) + 1
+                out[mode_key(d, keys[i])] = int(r) + 1
     return out
 
 
@@ -333,8 +338,9 @@ class PoseModel:
         prior[:, ~has] = 0.0
         self.prior_targets_ = has
         self.prior_model_ = prior_model
-        unmatched = sorted({f"{d}{m}" for d, m, _ in map(parse_target, self.targets_)} - set(mode_map))
-        unexplained = [t for t, h, c in zip(self.targets_, has, self.cross_) if not h and not c and f"{parse_target(t)[0]}{parse_target(t)[1]}" in mode_map]
+        modes = [mode_key(d, m) for d, m, _ in map(parse_target, self.targets_)]
+        unmatched = sorted(set(modes) - set(mode_map))
+        unexplained = [t for t, key, h, c in zip(self.targets_, modes, has, self.cross_) if not h and not c and key in mode_map]
         info = {"used": True, "stiffness_scales": scales.tolist(), "targets_with_prior": int(has.sum()), "fit_converged": bool(result.success),
                 "mode_map": mode_map}
         if unmatched:

@@ -37,8 +37,8 @@ class Layout(str, Enum):
     c6 = "idva-c6"
 
 
-#: The library's fields as `absorber tune` and `robust` name them (`flag_errors`).
-HOST_FLAGS = {"fn_hz": ("--host-fn-hz", None), "zeta": ("--host-zeta", None), "k_n_per_m": ("--host-k-n-per-m", None),
+#: The library's fields as the absorber commands' flags name them (`flag_errors`).
+ABSORBER_FLAGS = {"fn_hz": ("--host-fn-hz", None), "zeta": ("--host-zeta", None), "k_n_per_m": ("--host-k-n-per-m", None),
               "mass_ratio": ("--mass-ratio", None), "target_hz": ("--target-hz", None)}
 
 
@@ -64,7 +64,7 @@ def tune(
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Optimal absorber on a host mode (seed 002 eq. 18) and the absolute stability limits."""
-    with flag_errors(HOST_FLAGS):
+    with flag_errors(ABSORBER_FLAGS):
         host = Host(host_fn_hz, host_k_n_per_m, host_zeta)
         cut = Cut(teeth=teeth, kt_pa=kt_mpa * 1e6, kn_pa=kn_mpa * 1e6, radial_immersion=radial_immersion, milling=milling.value)
         h = mean_force_matrix(cut)[1, 1]  # the host mode is the flexible direction y, x rigid (seed 002)
@@ -122,7 +122,7 @@ def robust(
         raise InputError("--method " + ", ".join(METHODS), got=method, column="--method")
     speeds = np.linspace(rpm_min, rpm_max, rpm_steps)
     harmonics = None if case.feed_per_tooth_m is None else cutting_force_harmonics(cut, case.feed_per_tooth_m)
-    with flag_errors(HOST_FLAGS if mass_ratio is not None else None):  # (the host file's mass ratio is named by the file)
+    with flag_errors(ABSORBER_FLAGS if mass_ratio is not None else None):  # (the host file's mass ratio is named by the file)
         tunings = {"nominal": None if layout is None else tune_sims(layout.value, mu, uncertainty.nominal.zeta)}
     if robust_tuning_:  # tuned on other samples than it is judged on
         tunings["robust"] = robust_tuning(uncertainty, tunings["nominal"], cut, speeds, seed=seed + 1, force_harmonics=harmonics, force_limit_n=case.force_limit_n)
@@ -164,7 +164,7 @@ def field_cmd(
 ):
     """The coil field that tunes the MRF absorber to a frequency."""
     a = read_absorber(absorber)
-    with flag_errors(HOST_FLAGS):
+    with flag_errors(ABSORBER_FLAGS):
         setting = a.field_for_frequency(target_hz, clamp=True)
     out = {
         "target_hz": target_hz,

@@ -18,6 +18,7 @@ from posedyn.io.model_dir import check_model_target, load_model, save_model
 from posedyn.io.twin_file import load_twin
 from posedyn.posemodel import PoseModel, cross_validate
 from posedyn.posemodel import r2_score, suspect_measurements, table_targets
+from posedyn.posemodel.model import MODE_MATCH_FN, MODE_MATCH_K
 from service.cli.common import console, output_file, print_json, warn_outside_workspace
 
 
@@ -77,7 +78,8 @@ def train(
     if model.physics_ is not None:
         console.print(f"physics prior: {report['physics']}")
         if model.physics_.get("modes_without_prior"):
-            console.print(f"note: the twin has no mode within a factor 2 in frequency of {', '.join(model.physics_['modes_without_prior'])}: "
+            console.print(f"note: the twin has no mode within {MODE_MATCH_FN:g}x in frequency and {MODE_MATCH_K:g}x in stiffness of "
+                          f"{', '.join(model.physics_['modes_without_prior'])}: "
                           "those modes are learned without the prior (as stgp)")
         if model.physics_.get("targets_without_prior"):
             console.print(f"note: the twin's values of {', '.join(model.physics_['targets_without_prior'])} vary more over the training poses than the "
