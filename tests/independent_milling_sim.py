@@ -211,8 +211,11 @@ def default_duration(table, teeth, rpm):
 
 
 def simulate(table_rows, teeth, kt_pa, kn_pa, radial_immersion, milling, rpm, depth_m,
-             t_sim=None, ppp=40, min_steps_tooth=100, seed=0, chip_sign=+1):
-    """Simulate; returns dict with t, x, y, dt, tau, m."""
+             t_sim=None, ppp=40, min_steps_tooth=100, seed=0, chip_sign=+1, history=None,
+             initial_amplitude=1e-6):
+    """Simulate; returns dict with t, x, y, dt, tau, m. `history`: the previous pass's tool
+    positions (m, 2) (x, y at t = -tau + k dt, k = 0 .. m-1; default a smooth surface, zeros);
+    `initial_amplitude` 0 starts the modes at rest."""
     table = parse_table(table_rows)
     m, dt, tau = step_count(table, teeth, rpm, ppp, min_steps_tooth)
     if t_sim is None:
@@ -239,8 +242,8 @@ def simulate(table_rows, teeth, kt_pa, kn_pa, radial_immersion, milling, rpm, de
     st = []
     for (d, fn, z, k) in table:
         wn = 2 * math.pi * fn
-        a0 = 1e-6 * rng.standard_normal()
-        v0 = 1e-6 * wn * rng.standard_normal()
+        a0 = initial_amplitude * rng.standard_normal()
+        v0 = initial_amplitude * wn * rng.standard_normal()
         st += [a0, v0]
     X = [0.0] * (nsteps + m + 1)
     Y = [0.0] * (nsteps + m + 1)
@@ -248,10 +251,13 @@ def simulate(table_rows, teeth, kt_pa, kn_pa, radial_immersion, milling, rpm, de
     ys = sum(st[2 * i] for i, r in enumerate(table) if r[0] == "y")
     # index offset: sample k of the simulation is stored at X[k + m]; X[0..m-1] = previous
     # (smooth) surface -> zero history.  Loop indexes k+1 and k+1-m in storage coords.
+    if history is not None:
+        X[:m] = [float(v) for v in history[:, 0]]
+        Y[:m] = [float(v) for v in history[:, 1]]
     X[m] = xs
     Y[m] = ys
-    fx0 = Kd[0, 0, 0] * xs + Kd[0, 0, 1] * ys
-    fy0 = Kd[0, 1, 0] * xs + Kd[0, 1, 1] * ys
+    fx0 = Kd[0, 0, 0] * (xs - X[0]) + Kd[0, 0, 1] * (ys - Y[0])
+    fy0 = Kd[0, 1, 0] * (xs - X[0]) + Kd[0, 1, 1] * (ys - Y[0])
     loop = _make_loop([r[0] for r in table])
     # storage index s = k + m; p = (k+1) % m = (s+1) % m since s = k + m
     S = np.empty((nper + 1, len(st)))

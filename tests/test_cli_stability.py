@@ -18,7 +18,7 @@ def test_chatter_json_contract(datasets):
     result = posedyn("chatter", "--modes", datasets / "seeds/hou2023_positions.csv", "--pose-id", "P5", "--rpm", 2000, *CUT, "--depth-mm", 0.5, "--json")
     assert result.returncode == 0, result.stderr
     out = json.loads(result.stdout)
-    assert set(out) == {"pose_id", "rpm", "critical_depth_mm", "dominant_chatter_hz", "chatter_family_hz", "method", "converged", "rel_error_estimate", "free_flight_decay_efolds", "stable"}
+    assert set(out) == {"pose_id", "rpm", "critical_depth_mm", "dominant_chatter_hz", "chatter_family_hz", "method", "converged", "rel_error_estimate", "free_flight_decay_efolds", "no_growth_depth_mm", "stable"}
     assert out["pose_id"] == "P5" and out["method"] == "floquet" and out["converged"] and out["rel_error_estimate"] < 0.02
     assert out["critical_depth_mm"] == pytest.approx(0.891, abs=0.005)
     assert out["chatter_family_hz"][0] == out["dominant_chatter_hz"]

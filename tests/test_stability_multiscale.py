@@ -16,7 +16,7 @@ import independent_milling_sim as sim
 from absorber.coupling import with_absorber
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.io import read_modal_table
-from posedyn.stability import Cut, Discretization, StabilityModel, critical, critical_lobes, critical_points, floquet
+from posedyn.stability import Cut, Discretization, StabilityModel, critical, critical_lobes, critical_points, floquet, surface
 from posedyn.table import Mode
 
 #: The demo sweep's model at pose x1700_y-100_z600_b40 (issue 17): direction, fn_hz, zeta, k_n_per_m.
@@ -96,6 +96,7 @@ def test_the_override_says_it_is_not_estimated():
     assert result.method == "sdm" and result.converged is None and math.isnan(result.rel_error_estimate)
     accuracy = result.accuracy_json()
     assert 0 < accuracy.pop("free_flight_decay_efolds") < critical.SURFACE_MEMORY_EFOLDS  # (2000 rpm, 3 teeth, a/D 0.5)
+    assert accuracy.pop("no_growth_depth_mm") is None  # (the vibration does not die out between cuts)
     assert accuracy == {"method": "sdm", "converged": None, "rel_error_estimate": None, "steps": 40}
 
 
@@ -523,4 +524,68 @@ def test_where_only_the_surface_remembers_the_last_pass_the_boundary_holds_and_t
     for result, flagged in ((slow, True), (fast, False)):
         entry = SimpleNamespace(pose=pose, absorber=absorber, controller=None, stability=result, stability_with_absorber=result, robust=None,
                                 critical_depth_m=result.depth_m, dominant_chatter_hz=result.chatter_hz, critical_depth_with_absorber_m=result.depth_m)
-        assert ("surface_memory" in _result_columns(entry)["flags"].split(";")) is flagged
+        columns = _result_columns(entry)
+        assert ("surface_memory" in columns["flags"].split(";")) is flagged
+        assert columns["no_growth_depth_mm"] == (pytest.approx(9.27, rel=0.01) if flagged else None)
+
+
+def _simulated_pass_gain(rows, cut, rpm, depth_m):
+    """(the engine's ||L(a)||, the independent simulation's growth of that worst surface in one
+    pass): L's top right singular vector is written into the simulation's previous pass (as the
+    tool position along the chip direction n = (sin phi, cos phi)), the modes start at rest, and
+    the next pass's surface along n is compared in the L2 norm over the cut."""
+    dyn = ToolTipDynamics.from_modes(x=[Mode(f, z, k) for d, f, z, k in rows if d == "x"], y=[Mode(f, z, k) for d, f, z, k in rows if d == "y"])
+    samples = 2 * surface.surface_samples(dyn, cut, rpm)
+    gain, worst = surface.pass_gain(surface.surface_map(dyn, cut, rpm, depth_m, samples), vector=True)
+    start, exit_ = cut.engagement_rad
+    middles = start + (np.arange(samples) + 0.5) * (exit_ - start) / samples
+    m, _, tau = sim.step_count(sim.parse_table(rows), cut.teeth, rpm, 20, 100)
+    phi = np.full(m, np.nan)  # the angle of the tooth in the cut at each sample of a tooth period
+    for j in range(cut.teeth):
+        angle = np.mod(2 * np.pi * np.arange(m) / (cut.teeth * m) + 2 * np.pi * j / cut.teeth, 2 * np.pi)
+        phi = np.where((angle > start) & (angle < exit_), angle, phi)
+    inside = np.isfinite(phi)
+    phi = np.where(inside, phi, 0.0)
+    before = np.where(inside, np.interp(phi, middles, worst), 0.0)
+    history = np.stack([np.sin(phi) * before, np.cos(phi) * before], -1)
+    run = sim.simulate(rows, cut.teeth, cut.kt_pa, cut.kn_pa, cut.radial_immersion, cut.milling, rpm, depth_m, t_sim=2.5 * tau, ppp=20,
+                       history=history, initial_amplitude=0.0)
+    after = np.sin(phi) * run["x"][:m] + np.cos(phi) * run["y"][:m]
+    return gain, np.linalg.norm(after[inside]) / np.linalg.norm(before[inside])
+
+
+@pytest.mark.parametrize("rows, cut, rpm", [
+    ([("x", 3000.0, 0.02, 5e7), ("y", 3000.0, 0.02, 5e7)], Cut(teeth=1, kt_pa=796e6, kn_pa=169e6, radial_immersion=0.1, milling="up"), 300.0),
+    ([("x", 2200.0, 0.015, 3e7), ("x", 4100.0, 0.01, 6e7), ("y", 2500.0, 0.02, 4e7)], Cut(teeth=2, kt_pa=796e6, kn_pa=169e6, radial_immersion=0.05, milling="down"), 200.0),
+])
+def test_where_only_the_surface_remembers_no_perturbation_grows_below_the_no_growth_depth(rows, cut, rpm):
+    """Where every mode's vibration dies out between cuts, each pass maps the last pass's surface
+    to the next (`surface.surface_map`), and the depth at which that map's norm reaches 1 is the
+    deepest cut at which no perturbation grows from one pass to the next: 9.3 mm beside the
+    132 mm asymptotic boundary of the 300 rpm case above, 5.2 mm beside 31 mm for two teeth at
+    200 rpm. The independent simulation, started from the worst surface at 0.9 and 1.1 x that
+    depth, shrinks it and grows it by the engine's factor (within 2 %)."""
+    dyn = ToolTipDynamics.from_modes(x=[Mode(f, z, k) for d, f, z, k in rows if d == "x"], y=[Mode(f, z, k) for d, f, z, k in rows if d == "y"])
+    result = critical_points([dyn], cut, rpm)[0]
+    assert result.converged and result.free_flight_decay_efolds > critical.SURFACE_MEMORY_EFOLDS
+    depth = result.no_growth_depth_m
+    assert 0 < depth < result.depth_m / 5 and result.accuracy_json()["no_growth_depth_mm"] == pytest.approx(depth * 1e3)
+    for factor, grows in ((0.9, False), (1.1, True)):
+        engine, simulated = _simulated_pass_gain(rows, cut, rpm, factor * depth)
+        assert bool(engine > 1.0) is grows and engine == pytest.approx(factor, rel=0.03)  # (||L|| is nearly proportional to the depth)
+        assert simulated == pytest.approx(engine, rel=0.02) and bool(simulated > 1.0) is grows
+
+
+def test_the_no_growth_depth_is_given_only_where_each_pass_starts_from_rest():
+    """A mode that keeps vibrating between cuts (a robot mode at 15 Hz) carries state the pass map
+    leaves out, and at 3000 rpm the 3 kHz mode keeps e^-6.8 of it: no no-growth depth (NaN,
+    null in JSON)."""
+    cut = Cut(teeth=1, kt_pa=796e6, kn_pa=169e6, radial_immersion=0.1, milling="up")
+    spindle = Mode(3000.0, 0.02, 5e7)
+    flagged = critical.StabilityResult(0.13, 3000.0, "floquet", True, 0.001, free_flight_decay_efolds=68.0)
+    robot = ToolTipDynamics.from_modes(x=[Mode(15.0, 0.03, 2e7), spindle], y=[spindle])
+    assert math.isnan(critical._with_no_growth_depth(flagged, robot, cut, 300.0).no_growth_depth_m)
+    alone = ToolTipDynamics.from_modes(x=[spindle], y=[spindle])
+    assert critical._with_no_growth_depth(flagged, alone, cut, 300.0).no_growth_depth_m == pytest.approx(0.00927, rel=0.01)
+    fast = critical_points([alone], cut, 3000.0)[0]
+    assert math.isnan(fast.no_growth_depth_m) and fast.accuracy_json()["no_growth_depth_mm"] is None

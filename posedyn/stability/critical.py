@@ -23,7 +23,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from posedyn.dynamics import ToolTipDynamics
-from posedyn.stability import floquet, zoa
+from posedyn.stability import floquet, surface, zoa
 from posedyn.stability.batch import BatchStability
 from posedyn.stability.cutting import Cut
 from posedyn.stability.model import Discretization
@@ -47,11 +47,13 @@ class StabilityResult:
     steps: int | None = None  # the override's steps per delay
     family: tuple = ()  # ((hz, relative tool-tip amplitude), ...), largest first
     free_flight_decay_efolds: float = math.nan  # `free_flight_decay` (NaN without a chatter frequency)
+    no_growth_depth_m: float = math.nan  # `surface.no_growth_depth` where only the surface remembers the last pass (else NaN)
 
     def accuracy_json(self) -> dict:
         out = {"method": self.method, "converged": self.converged,
                "rel_error_estimate": self.rel_error_estimate if math.isfinite(self.rel_error_estimate) else None,
-               "free_flight_decay_efolds": self.free_flight_decay_efolds if math.isfinite(self.free_flight_decay_efolds) else None}
+               "free_flight_decay_efolds": self.free_flight_decay_efolds if math.isfinite(self.free_flight_decay_efolds) else None,
+               "no_growth_depth_mm": self.no_growth_depth_m * 1e3 if math.isfinite(self.no_growth_depth_m) else None}
         if self.steps is not None:
             out["steps"] = self.steps
         return out
@@ -98,7 +100,8 @@ def critical_points(structures: list[ToolTipDynamics], cut: Cut, rpm, steps: int
         results = [_converged_or_flagged(p, frequencies) for p in points]
     else:
         results = _sdm_points(structures, cut, rpm, steps, frequencies)
-    return [dataclasses.replace(r, free_flight_decay_efolds=free_flight_decay(s, cut, float(n), r.chatter_hz)) for r, s, n in zip(results, structures, rpm)]
+    results = [dataclasses.replace(r, free_flight_decay_efolds=free_flight_decay(s, cut, float(n), r.chatter_hz)) for r, s, n in zip(results, structures, rpm)]
+    return [_with_no_growth_depth(r, s, cut, float(n)) for r, s, n in zip(results, structures, rpm)]
 
 
 def _floquet_points(structures, cut, rpm, verify, frequencies=True, continuation=False):
@@ -132,10 +135,30 @@ def free_flight_decay(dyn: ToolTipDynamics, cut: Cut, rpm: float, chatter_hz: fl
     3000 rpm (6.8) at most 34-fold at 90 mm."""
     if not math.isfinite(chatter_hz) or chatter_hz <= 0:
         return math.nan
+    return float(_mode_decays(dyn, cut, rpm)[int(np.argmin(np.abs(dyn.fn_hz - chatter_hz)))])
+
+
+def _mode_decays(dyn: ToolTipDynamics, cut: Cut, rpm: float) -> np.ndarray:
+    """zeta w T_free of every mode (`free_flight_decay`)."""
     start, exit_ = cut.engagement_rad
     free_rad = max(0.0, 2.0 * math.pi / cut.teeth - (exit_ - start))
-    k = int(np.argmin(np.abs(dyn.fn_hz - chatter_hz)))
-    return float(dyn.zeta[k] * 2.0 * math.pi * dyn.fn_hz[k] * free_rad / (2.0 * math.pi * rpm / 60.0))
+    return dyn.zeta * 2.0 * math.pi * dyn.fn_hz * free_rad / (2.0 * math.pi * rpm / 60.0)
+
+
+def _with_no_growth_depth(result: StabilityResult, dyn: ToolTipDynamics, cut: Cut, rpm: float) -> StabilityResult:
+    """`result` with the depth below which no surface perturbation grows from one pass to the
+    next (`surface.no_growth_depth`), where the chattering mode and every other relevant one
+    (`floquet.relevant_modes`) decay by more than SURFACE_MEMORY_EFOLDS between cuts (the pass
+    map's premise: each pass starts from rest; a robot mode that keeps vibrating between cuts
+    carries state it leaves out) and the depth is resolved to REL_TOL; else unchanged (NaN)."""
+    if not result.free_flight_decay_efolds > SURFACE_MEMORY_EFOLDS:
+        return result
+    if _mode_decays(dyn, cut, rpm)[floquet.relevant_modes(dyn)].min() <= SURFACE_MEMORY_EFOLDS:
+        return result
+    limit = surface.no_growth_depth(dyn, cut, rpm, result.depth_m)
+    if not limit.rel_error_estimate <= REL_TOL:
+        return result
+    return dataclasses.replace(result, no_growth_depth_m=limit.depth_m)
 
 
 def _converged_or_flagged(point, frequencies: bool) -> StabilityResult:

@@ -109,6 +109,8 @@ def chatter(
         if steps is None:
             # the engine verifies that no boundary point lies below the critical depth
             out.update(stable=bool(depth_mm * 1e-3 < result.depth_m))
+            if out["no_growth_depth_mm"] is not None:  # (only the surface remembers the last pass)
+                out.update(grows_between_passes=bool(depth_mm > out["no_growth_depth_mm"]))
         else:
             rho = float(model.spectral_radius(rpm, depth_mm * 1e-3))
             out.update(spectral_radius=rho, stable=rho < 1.0)
@@ -134,13 +136,21 @@ def chatter(
         verdict = "stable" if out["stable"] else "CHATTER"
         if steps is None and not result.converged:
             verdict += " by a depth that did NOT converge: not assured"
+        if out.get("grows_between_passes") and out["stable"]:
+            verdict += f" in the long run only: deeper than {out['no_growth_depth_mm']:.3g} mm, a perturbation of the surface can grow for many passes"
         table.add_row(f"at {depth_mm:g} mm", verdict if steps is None else f"spectral radius {out['spectral_radius']:.6f} ({verdict})")
     console.print(table)
     efolds = out["free_flight_decay_efolds"]
     if efolds is not None and efolds > SURFACE_MEMORY_EFOLDS:
-        console.print(f"note: between cuts the chattering mode's vibration decays by e^-{efolds:.0f}: only the surface remembers the last pass, and the "
-                      "critical depth is the asymptotic (Floquet) boundary; below it a perturbation can grow for many passes before it decays "
-                      "(300-fold at a sixth of it in the README's 300 rpm example): keep well below it")
+        note = (f"note: between cuts the chattering mode's vibration decays by e^-{efolds:.0f}: only the surface remembers the last pass, and the "
+                "critical depth is the asymptotic (Floquet) boundary; ")
+        if out["no_growth_depth_mm"] is not None:
+            note += (f"from {out['no_growth_depth_mm']:.3g} mm a perturbation of the surface can grow for many passes before it decays, and below "
+                     "that depth none grows from one pass to the next: keep below it")
+        else:
+            note += ("below it a perturbation can grow for many passes before it decays (300-fold at a sixth of it in the README's 300 rpm "
+                     "example; the depth it starts from is computed only where every mode's vibration dies out between cuts): keep well below it")
+        console.print(note)
 
 
 #: Speeds a lobe diagram computes between progress lines on a terminal (`_lobes_with_progress`).

@@ -140,6 +140,7 @@ def _result_columns(result) -> dict:
         lowest_fn_hz=lowest[2],
         lowest_fn_std_hz=lowest[5],
         critical_depth_mm=_mm(result.critical_depth_m),
+        no_growth_depth_mm=_mm(result.stability.no_growth_depth_m),  # (where only the surface remembers the last pass)
         dominant_chatter_hz=result.dominant_chatter_hz,
         target_hz=a.target_hz,
         field_mt=a.field_t * 1e3,

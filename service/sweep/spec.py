@@ -20,6 +20,7 @@ RESULT_COLUMNS = (
     "lowest_fn_hz",
     "lowest_fn_std_hz",
     "critical_depth_mm",
+    "no_growth_depth_mm",
     "dominant_chatter_hz",
     "target_hz",
     "field_mt",
