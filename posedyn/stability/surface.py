@@ -122,7 +122,7 @@ def no_growth_depth(dyn: ToolTipDynamics, cut: Cut, rpm: float, upper_m: float) 
     if 2 * samples > MAX_SAMPLES or exit_ - start >= 2.0 * math.pi / cut.teeth or not upper_m > 0:
         return NoGrowthDepth(math.nan, math.inf, 2 * samples)
     depths = []
-    guess = 0.1 * upper_m
+    guess = 0.1 * upper_m if math.isfinite(upper_m) else 1e-3  # (L is about proportional to the depth: any start will do)
     for count in (samples, 2 * samples):
         depth = _unit_gain(dyn, cut, rpm, count, guess, upper_m)
         depths.append(depth)
