@@ -193,14 +193,14 @@ def lsfd(frequency_hz, H, modes: list[IdentifiedMode], weighting: str = "relativ
         b = np.concatenate([H[:, o].real * w, H[:, o].imag * w])
         best = None
         for ratio in UPPER_RATIOS:
-            Aw[: len(f), -1] = w / (1.0 - (f / (ratio * f.max())) ** 2)  # real: its imaginary rows stay 0
+            Aw[: len(f), -1] = w * _pseudo_mode(f, ratio)  # real: its imaginary rows stay 0
             x, *_ = np.linalg.lstsq(Aw, b, rcond=None)
             residual = b - Aw @ x
             if best is None or residual @ residual < best[0]:
                 best = (residual @ residual, ratio, x, residual)
         _, ratio, x, residual = best
-        Aw[: len(f), -1] = w / (1.0 - (f / (ratio * f.max())) ** 2)
-        A[:, -1] = 1.0 / (1.0 - (f / (ratio * f.max())) ** 2)
+        A[:, -1] = _pseudo_mode(f, ratio)
+        Aw[: len(f), -1] = w * A[:, -1].real
         dof = max(len(b) - len(x), 1)
         cov = np.linalg.pinv(Aw.T @ Aw) * (residual @ residual / dof)
         R[:, o] = x[0 : 2 * len(modes) : 2] + 1j * x[1 : 2 * len(modes) : 2]
@@ -208,6 +208,11 @@ def lsfd(frequency_hz, H, modes: list[IdentifiedMode], weighting: str = "relativ
         std[:, o] = np.sqrt(var[0 : 2 * len(modes) : 2] + var[1 : 2 * len(modes) : 2])
         fit[:, o] = A @ x
     return R, std, fit
+
+
+def _pseudo_mode(f: np.ndarray, ratio: float) -> np.ndarray:
+    """1 / (1 - (f / f_u)^2), f_u = ratio x the band's top (`UPPER_RATIOS`)."""
+    return 1.0 / (1.0 - (f / (ratio * f.max())) ** 2)
 
 
 def stiffness_rel_std(modes: list[IdentifiedMode], R: np.ndarray, std_R: np.ndarray) -> np.ndarray:

@@ -10,10 +10,9 @@ integrating the modes with DOP853 instead. Second order: case 1 below gives a* =
 9.2539 mm at 2000 / 4000 / 8000 points, case 2 5.2419 / 5.2413 / 5.2412 mm. (Its force sign is
 the opposite of the project's; the norm does not depend on it.)
 """
-import numpy as np, sys
+import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.sparse.linalg import svds, LinearOperator
-from scipy.optimize import brentq
 from scipy.integrate import solve_ivp
 from scipy.interpolate import CubicSpline
 Kt, Kn = 796e6, 169e6
