@@ -151,7 +151,7 @@ def test_a_depth_that_did_not_converge_is_never_shown_as_a_plain_verdict(dataset
     monkeypatch.setattr(cli, "critical_lobes", lambda *a, **k: unconverged(engine_lobes(*a, **k)[:1]) + engine_lobes(*a, **k)[1:])
     args = ["--modes", datasets / "seeds/hou2023_positions.csv", "--pose-id", "P5", *CUT]
     text = posedyn("chatter", *args, "--rpm", 2000, "--depth-mm", 0.5).stdout
-    assert "NOT converged" in text and "stable by a depth that did NOT converge: not assured" in text
+    assert "NOT converged" in text and "stable; the critical depth did NOT converge: not assured" in text
     text = posedyn("lobes", *args, "--rpm-min", 1900, "--rpm-max", 2000, "--rpm-steps", 2, "--workers", 1).stdout
     assert "NOT converged at 1 of 2 speeds (1900 rpm)" in text
 

@@ -20,7 +20,8 @@ from posedyn.errors import InputError
 from posedyn.io import read_modal_table
 from posedyn.io.atomic import write_text_atomic
 from posedyn.stability import (
-    SURFACE_MEMORY_EFOLDS, Cut, Discretization, StabilityModel, StabilityResult, absolute_limit, critical_lobes, critical_points, free_flight_decay, zoa,
+    SURFACE_MEMORY_EFOLDS, Cut, Discretization, StabilityModel, StabilityResult, absolute_limit, critical_lobes, critical_points, free_flight_decay,
+    modes_carrying_over, zoa,
 )
 from posedyn.stability.cutting import check_rpm
 from service.cli.common import Milling, console, finite_or_none, flag_errors, output_file, print_json
@@ -132,12 +133,14 @@ def chatter(
     if steps is None:
         state = f"within {100 * result.rel_error_estimate:.2g} % (estimated)" if result.converged else f"NOT converged (estimated error {100 * result.rel_error_estimate:.2g} %)"
         table.add_row("accuracy", state)
+    if out["no_growth_depth_mm"] is not None:
+        table.add_row("no-growth depth", f"{out['no_growth_depth_mm']:.4g} mm (no surface perturbation grows from one pass to the next below it)")
     if depth_mm is not None:
         verdict = "stable" if out["stable"] else "CHATTER"
-        if steps is None and not result.converged:
-            verdict += " by a depth that did NOT converge: not assured"
         if out.get("grows_between_passes") and out["stable"]:
-            verdict += f" in the long run only: deeper than {out['no_growth_depth_mm']:.3g} mm, a perturbation of the surface can grow for many passes"
+            verdict += f" in the long run only (deeper than {out['no_growth_depth_mm']:.3g} mm a perturbation of the surface can grow for many passes)"
+        if steps is None and not result.converged:
+            verdict += "; the critical depth did NOT converge: not assured"
         table.add_row(f"at {depth_mm:g} mm", verdict if steps is None else f"spectral radius {out['spectral_radius']:.6f} ({verdict})")
     console.print(table)
     efolds = out["free_flight_decay_efolds"]
@@ -148,8 +151,10 @@ def chatter(
             note += (f"from {out['no_growth_depth_mm']:.3g} mm a perturbation of the surface can grow for many passes before it decays, and below "
                      "that depth none grows from one pass to the next: keep below it")
         else:
+            carrying = modes_carrying_over(model.dyn, model.cut, rpm)
             note += ("below it a perturbation can grow for many passes before it decays (300-fold at a sixth of it in the README's 300 rpm "
-                     "example; the depth it starts from is computed only where every mode's vibration dies out between cuts): keep well below it")
+                     f"example); the depth where that starts is not given here because the {', '.join(f'{f:.4g}' for f in carrying)} Hz "
+                     "mode keeps vibrating between cuts (it needs every mode to die out): keep well below the critical depth")
         console.print(note)
 
 
