@@ -193,10 +193,14 @@ def lsfd(frequency_hz, H, modes: list[IdentifiedMode], weighting: str = "relativ
         w = 1.0 / np.maximum(np.abs(H[:, o]), 1e-3 * scale[o]) if weighting == "relative" else np.ones(len(f))  # relative: noise ~ |H|
         Aw = Ar * np.concatenate([w, w])[:, None]
         b = np.concatenate([H[:, o].real * w, H[:, o].imag * w])
-        def misfit(ln_ratio):
-            Aw[: len(f), -1] = w * _pseudo_mode(f, math.exp(ln_ratio))  # real: its imaginary rows stay 0
-            x, *_ = np.linalg.lstsq(Aw, b, rcond=None)
-            return float(np.sum((b - Aw @ x) ** 2))
+        Q, _ = np.linalg.qr(Aw[:, :-1])  # the other terms' span: each f_u costs a projection, not a solve
+        r0 = b - Q @ (Q.T @ b)
+
+        def misfit(ln_ratio):  # |residual|^2 with the pseudo-mode added: r0's part along its direction off Q removed
+            p = np.zeros(len(b))
+            p[: len(f)] = w * _pseudo_mode(f, math.exp(ln_ratio))  # real: its imaginary rows stay 0
+            p -= Q @ (Q.T @ p)
+            return float(r0 @ r0 - (p @ r0) ** 2 / max(p @ p, 1e-300))
 
         grid = np.log(UPPER_RATIOS)
         j = int(np.argmin([misfit(g) for g in grid]))
