@@ -43,8 +43,8 @@ class InputError(ValueError):
             where.append(f"row {self.row}" + (f" (line {self.line})" if self.line is not None else ""))
         elif self.line is not None:
             where.append(f"line {self.line}")
-        if self.column is not None:
-            where.append(f"column '{self.column}'")
+        if self.column is not None:  # a command-line flag is an option, not a column
+            where.append(f"option '{self.column}'" if str(self.column).startswith("--") else f"column '{self.column}'")
         text = f"expected {self.expected}"
         if self.got is not None:
             text += f", got {_plain(self.got)!r}"

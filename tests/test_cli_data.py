@@ -97,12 +97,12 @@ def test_flags_and_file_keys_are_named_as_the_user_wrote_them(tmp_path, datasets
     for flag, bad in (("--host-fn-hz", -5), ("--host-zeta", -0.01), ("--host-k-n-per-m", "nan"), ("--mass-ratio", -1)):
         args = [x for k, v in {**host, flag: bad}.items() for x in (k, v)]
         result = posedyn("absorber", "tune", *args, *cut)
-        assert result.returncode == 2 and result.stderr.startswith(f"error: column '{flag}'"), result.stderr
-    assert posedyn("absorber", "field", "--target-hz", -3).stderr.startswith("error: column '--target-hz'")
+        assert result.returncode == 2 and result.stderr.startswith(f"error: option '{flag}'"), result.stderr
+    assert posedyn("absorber", "field", "--target-hz", -3).stderr.startswith("error: option '--target-hz'")
     result = posedyn("twin", "campaign", "--grid", datasets / "campaigns/seed003_grid.toml", "--out", tmp_path / "c.csv", "--noise-fn-pct", -1)
-    assert result.returncode == 2 and result.stderr.startswith("error: column '--noise-fn-pct'")
+    assert result.returncode == 2 and result.stderr.startswith("error: option '--noise-fn-pct'")
     result = posedyn("twin", "modes", "--x-mm", "nan", "--y-mm", 0, "--z-mm", 600, "--beta-deg", 0)
-    assert result.returncode == 2 and result.stderr.startswith("error: column '--x-mm': expected a finite number")
+    assert result.returncode == 2 and result.stderr.startswith("error: option '--x-mm': expected a finite number")
     assert "[host], [cut]" in posedyn("absorber", "robust", "--help").stdout  # (rich markup ate them)
 
     actuator = tmp_path / "slow_actuator.toml"

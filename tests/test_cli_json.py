@@ -126,7 +126,7 @@ def test_flags_that_would_be_ignored_or_refused_later_are_errors_at_once(tmp_pat
     """`absorber robust --rpm-steps 1` silently ignored --rpm-max; `serve --pivot-mm -5` with a
     tool change started and refused every query."""
     done = run_cli("absorber", "robust", "--host", DATA / "seeds/dogan2024_host_milling.toml", "--rpm-min", "2700", "--rpm-max", "3000", "--rpm-steps", "1")
-    assert done.returncode == 2 and done.stderr.startswith("error: column '--rpm-steps'")
+    assert done.returncode == 2 and done.stderr.startswith("error: option '--rpm-steps'")
     done = run_cli("serve", "--model", tmp_path, "--cell", "c", "--cut", DATA / "seeds/hou2023_cut.toml", "--state-dir", tmp_path / "state",
                    "--reference-tool", DATA / "seeds/seed003_reference_tool.toml", "--target-tool", DATA / "seeds/seed003_target_tool.toml", "--pivot-mm", "-5")
-    assert done.returncode == 2 and done.stderr.startswith("error: column '--pivot-mm'") and not (tmp_path / "state").exists()
+    assert done.returncode == 2 and done.stderr.startswith("error: option '--pivot-mm'") and not (tmp_path / "state").exists()

@@ -193,5 +193,5 @@ def test_the_cut_ranges_are_the_services_everywhere(datasets, tmp_path):
     for flags, flag in ((["--rpm", "50", "--teeth", "3", "--kt-mpa", "796"], "--rpm"), (["--rpm", "2000", "--teeth", "40", "--kt-mpa", "796"], "--teeth"),
                         (["--rpm", "2000", "--teeth", "3", "--kt-mpa", "7.96e8"], "--kt-mpa")):
         done = run_cli(*base, *flags)
-        assert done.returncode == 2 and done.stderr.startswith(f"error: column '{flag}'"), done.stderr
+        assert done.returncode == 2 and done.stderr.startswith(f"error: option '{flag}'"), done.stderr
     assert RANGES["rpm"][:2] == (100.0, 100_000.0) and RANGES["kt_mpa"][1] == 20_000.0

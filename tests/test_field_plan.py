@@ -166,4 +166,4 @@ def test_a_plan_the_solver_cannot_make_is_an_error_and_a_microsecond_path_is_a_p
     assert summary["solver"]["status"] == "solved" and summary["plan"]["max_mistune_pct"] > 30
     (tmp_path / "afile").write_text("")  # a file as the output folder: said before the work ('afile: File exists' after it)
     done = run_cli("plan", model_dir, "--path", path, "--cut", cut, "--out", tmp_path / "afile")
-    assert done.returncode == 2 and done.stderr.startswith(f"error: {tmp_path / 'afile'}, column '--out': expected a folder")
+    assert done.returncode == 2 and done.stderr.startswith(f"error: {tmp_path / 'afile'}, option '--out': expected a folder")

@@ -212,18 +212,18 @@ def test_query_reads_its_request_before_connecting_and_an_unreachable_service_is
     # NaN / Infinity (not JSON: the request could not be sent) and an empty plan were tracebacks
     for option, text in (("--pose-json", json.dumps({**P5, "x_mm": float("nan")})), ("--pose-json", "[1, 2]")):
         bad = run_cli("query", "--cell", "c", "--connect", nowhere, option, text, "--timeout-s", "2")
-        assert bad.returncode == 2 and bad.stderr.startswith(f"error: column '{option}': expected a JSON object"), bad.stderr
+        assert bad.returncode == 2 and bad.stderr.startswith(f"error: option '{option}': expected a JSON object"), bad.stderr
     bad = run_cli("query", "--cell", "c", "--connect", nowhere, "--pose-json", json.dumps(P5), "--cut-json", '{"rpm": Infinity}', "--timeout-s", "2")
     assert bad.returncode == 2 and "Infinity is not a JSON number" in bad.stderr
     # flags judged before connecting (a wildcard cell, Zenoh's debug text for a bad endpoint, a plan id the service refuses after a 6 s wait)
     for flags, flag in ((["--cell", "c/**", "--connect", nowhere], "--cell"), (["--cell", "c", "--connect", "garbage"], "--connect"),
                         (["--cell", "c", "--connect", nowhere, "--timeout-s", "-1"], "--timeout-s")):
         bad = run_cli("query", *flags, "--pose-json", json.dumps(P5))
-        assert bad.returncode == 2 and bad.stderr.startswith(f"error: column '{flag}'"), bad.stderr
+        assert bad.returncode == 2 and bad.stderr.startswith(f"error: option '{flag}'"), bad.stderr
     path = tmp_path / "p5.csv"
     path.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nP5,1400,0,800,0\n")
     bad = run_cli("query", "--cell", "c", "--connect", nowhere, "--plan", path, "--plan-id", "../etc", "--timeout-s", "2")
-    assert bad.returncode == 2 and bad.stderr.startswith("error: column '--plan-id'")
+    assert bad.returncode == 2 and bad.stderr.startswith("error: option '--plan-id'")
     empty = tmp_path / "path.csv"
     empty.write_text("")
     bad = run_cli("query", "--cell", "c", "--connect", nowhere, "--plan", empty, "--timeout-s", "2")

@@ -322,7 +322,7 @@ def test_state_writes_are_durable_fsync_of_the_file_and_its_folder(tmp_path, mon
 
 @pytest.mark.parametrize("flag, value", [("--stale-after-s", "0"), ("--stale-after-s", "nan"), ("--stale-after-s", "inf"), ("--cell", "c/9")])
 def test_a_bad_serve_flag_is_named_as_itself(model_dir, tmp_path, flag, value):
-    """`serve --stale-after-s 0` (or -5, nan) said "column '--cell': expected a cell name ...,
+    """`serve --stale-after-s 0` (or -5, nan) said "option '--cell': expected a cell name ...,
     got 'c9'" about a valid cell; every limit is named as its flag, and nan or inf is refused."""
     from tests.cli_helpers import run_cli
 
@@ -330,5 +330,5 @@ def test_a_bad_serve_flag_is_named_as_itself(model_dir, tmp_path, flag, value):
     args[flag] = value
     done = run_cli("serve", "--model", model_dir, "--cut", CUT, "--listen", f"tcp/127.0.0.1:{free_port()}", "--state-dir", tmp_path / "state",
                    *[x for item in args.items() for x in item])
-    assert done.returncode == 2 and done.stderr.startswith(f"error: column '{flag}'"), done.stderr
+    assert done.returncode == 2 and done.stderr.startswith(f"error: option '{flag}'"), done.stderr
     assert not (tmp_path / "state").exists()
