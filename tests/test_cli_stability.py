@@ -195,3 +195,18 @@ def test_the_cut_ranges_are_the_services_everywhere(datasets, tmp_path):
         done = run_cli(*base, *flags)
         assert done.returncode == 2 and done.stderr.startswith(f"error: option '{flag}'"), done.stderr
     assert RANGES["rpm"][:2] == (100.0, 100_000.0) and RANGES["kt_mpa"][1] == 20_000.0
+
+
+def test_lobes_where_only_the_surface_remembers_give_the_no_growth_depth_chatter_gives(tmp_path):
+    """A lobe diagram at low speed (one 3 kHz mode a direction, one tooth, a/D 0.1: the vibration
+    dies out between cuts) gives each speed's no-growth depth beside the asymptotic lobes, the
+    same as `chatter` at that speed; at speeds where the vibration carries over, none."""
+    table = tmp_path / "spindle.csv"
+    table.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg,direction,mode,fn_hz,zeta,k_n_per_m\nP,0,0,0,0,x,1,3000,0.02,2e7\nP,0,0,0,0,y,1,3000,0.02,2e7\n")
+    cut = ["--teeth", "1", "--kt-mpa", "796", "--kn-mpa", "169", "--radial-immersion", "0.1", "--milling", "down"]
+    slow = json.loads(posedyn("lobes", "--modes", table, *cut, "--rpm-min", 300, "--rpm-max", 600, "--rpm-steps", 2, "--workers", 1, "--json").stdout)
+    one = json.loads(posedyn("chatter", "--modes", table, *cut, "--rpm", 600, "--json").stdout)
+    assert slow["no_growth_depth_mm"][1] == pytest.approx(one["no_growth_depth_mm"], rel=1e-6) and slow["critical_depth_mm"][1] == pytest.approx(one["critical_depth_mm"], rel=1e-6)
+    assert all(3.0 < d < c / 5 for d, c in zip(slow["no_growth_depth_mm"], slow["critical_depth_mm"]))
+    fast = json.loads(posedyn("lobes", "--modes", table, *cut, "--rpm-min", 29000, "--rpm-max", 30000, "--rpm-steps", 2, "--workers", 1, "--json").stdout)
+    assert "no_growth_depth_mm" not in fast

@@ -100,8 +100,7 @@ def critical_points(structures: list[ToolTipDynamics], cut: Cut, rpm, steps: int
         results = [_converged_or_flagged(p, frequencies) for p in points]
     else:
         results = _sdm_points(structures, cut, rpm, steps, frequencies)
-    results = [dataclasses.replace(r, free_flight_decay_efolds=free_flight_decay(s, cut, float(n), r.chatter_hz)) for r, s, n in zip(results, structures, rpm)]
-    return [_with_no_growth_depth(r, s, cut, float(n)) for r, s, n in zip(results, structures, rpm)]
+    return [_with_surface_memory(r, s, cut, float(n)) for r, s, n in zip(results, structures, rpm)]
 
 
 def _floquet_points(structures, cut, rpm, verify, frequencies=True, continuation=False):
@@ -156,6 +155,14 @@ def modes_carrying_over(dyn: ToolTipDynamics, cut: Cut, rpm: float) -> np.ndarra
     mode at 10-20 Hz always does), which the pass map (`surface`) leaves out."""
     keep = floquet.relevant_modes(dyn)
     return dyn.fn_hz[keep][_mode_decays(dyn, cut, rpm)[keep] <= SURFACE_MEMORY_EFOLDS]
+
+
+def _with_surface_memory(result: StabilityResult, dyn: ToolTipDynamics, cut: Cut, rpm: float) -> StabilityResult:
+    """`result` with its chattering mode's `free_flight_decay` and, where only the surface
+    remembers the last pass, its no-growth depth (`_with_no_growth_depth`): every result of
+    `critical_points` and `critical_lobes` goes through this."""
+    result = dataclasses.replace(result, free_flight_decay_efolds=free_flight_decay(dyn, cut, rpm, result.chatter_hz))
+    return _with_no_growth_depth(result, dyn, cut, rpm)
 
 
 def _with_no_growth_depth(result: StabilityResult, dyn: ToolTipDynamics, cut: Cut, rpm: float) -> StabilityResult:
@@ -244,6 +251,6 @@ def _can_fork() -> bool:
 def _lobe_points(dyn: ToolTipDynamics, cut: Cut, rpm: np.ndarray) -> list[StabilityResult]:
     lobes = floquet.lobes(dyn, cut, rpm, rel_tol=REL_TOL, verify=True)
     return [
-        StabilityResult(float(d), float(f), "floquet", bool(c and v), _estimate(e, bool(v)))
-        for d, f, c, v, e in zip(lobes.depth_m, lobes.chatter_hz, lobes.converged, lobes.verified, lobes.rel_error_estimate)
+        _with_surface_memory(StabilityResult(float(d), float(f), "floquet", bool(c and v), _estimate(e, bool(v))), dyn, cut, float(n))
+        for d, f, c, v, e, n in zip(lobes.depth_m, lobes.chatter_hz, lobes.converged, lobes.verified, lobes.rel_error_estimate, rpm)
     ]

@@ -212,11 +212,12 @@ def lobes(
     if rpm_steps < 2:
         raise InputError("at least 2 speeds", got=rpm_steps, column="--rpm-steps")
     rpm = np.linspace(rpm_min, rpm_max, rpm_steps)
-    converged = None
+    converged, no_growth = None, np.full(len(rpm), np.nan)
     if method is Method.floquet:
         results = _lobes_with_progress(model, rpm, workers)
         depth = np.array([r.depth_m for r in results])
         converged = [r.converged for r in results]
+        no_growth = np.array([r.no_growth_depth_m for r in results])
         limit = absolute_limit(model.dyn, model.cut, depth)
         absolute, source = limit.depth_m, limit.source
     elif method is Method.sdm:
@@ -230,12 +231,14 @@ def lobes(
     out = {"rpm": rpm.tolist(), "critical_depth_mm": depth_mm, "absolute_limit_mm": finite_or_none(absolute * 1e3), "absolute_limit_source": source, "method": method.value}
     if converged is not None:
         out["converged"] = converged
+    if np.isfinite(no_growth).any():  # (where only the surface remembers the last pass)
+        out["no_growth_depth_mm"] = [finite_or_none(d * 1e3) for d in no_growth]
     if method is Method.sdm:
         out["steps"] = model.disc.steps
     if csv_out is not None:
         _write_csv(csv_out, rpm, depth_mm)
     if plot is not None:
-        _plot(plot, rpm, depth * 1e3, absolute * 1e3, f"pose {pose}, {method.value}")
+        _plot(plot, rpm, depth * 1e3, absolute * 1e3, f"pose {pose}, {method.value}", no_growth * 1e3)
     if as_json:
         print_json(out)
         return
@@ -245,6 +248,11 @@ def lobes(
     console.print(f"  lowest critical depth {np.min(depth) * 1e3:.4g} mm at {rpm[np.argmin(depth)]:.0f} rpm; absolute limit {absolute * 1e3:.4g} mm ({said})")
     best = int(np.argmax(np.where(np.isfinite(depth), depth, -np.inf)))
     console.print(f"  highest critical depth {depth[best] * 1e3:.4g} mm at {rpm[best]:.0f} rpm")
+    if np.isfinite(no_growth).any():
+        shown = no_growth[np.isfinite(no_growth)] * 1e3
+        console.print(f"  only the surface remembers the last pass at {len(shown)} of {len(rpm)} speeds: there the critical depth is the asymptotic "
+                      f"boundary, and no surface perturbation grows from one pass to the next below {shown.min():.4g}-{shown.max():.4g} mm "
+                      "(--json: 'no_growth_depth_mm'; `posedyn chatter` at one speed says more)")
     if converged is not None and not all(converged):
         missed = [f"{r:.0f}" for r, ok in zip(rpm, converged) if not ok]
         console.print(f"  NOT converged at {len(missed)} of {len(rpm)} speeds ({', '.join(missed[:8])}{', ...' if len(missed) > 8 else ''} rpm): "
@@ -259,7 +267,7 @@ def _write_csv(path: Path, rpm, depth_mm) -> None:
     write_text_atomic(path, "\n".join(lines) + "\n")
 
 
-def _plot(path: Path, rpm, depth_mm, absolute_mm, title: str) -> None:
+def _plot(path: Path, rpm, depth_mm, absolute_mm, title: str, no_growth_mm=None) -> None:
     import matplotlib  # heavy (about 0.3 s): only when a figure is drawn
 
     matplotlib.use("Agg")
@@ -270,6 +278,8 @@ def _plot(path: Path, rpm, depth_mm, absolute_mm, title: str) -> None:
     ax.plot(rpm, depth_mm, color="tab:red")
     if np.isfinite(absolute_mm):
         ax.axhline(absolute_mm, color="0.3", ls="--", lw=1, label=f"absolute limit {absolute_mm:.3g} mm")
+    if no_growth_mm is not None and np.isfinite(no_growth_mm).any():
+        ax.plot(rpm, no_growth_mm, color="tab:blue", lw=1.5, label="no-growth depth (surface memory)")
     ax.set_xlabel("spindle speed (rpm)")
     ax.set_ylabel("critical axial depth (mm)")
     ax.set_title(title)
