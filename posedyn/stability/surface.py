@@ -36,7 +36,7 @@ import scipy.sparse.linalg
 from posedyn.dynamics import ToolTipDynamics
 from posedyn.stability import sdm
 from posedyn.stability.cutting import Cut, engaged_integral
-from posedyn.stability.floquet import FloquetCharacteristic
+from posedyn.stability.floquet import FloquetCharacteristic, relevant_modes
 
 #: Surface samples per period of the fastest relevant mode at the coarser of the two resolutions.
 SAMPLES_PER_PERIOD = 16
@@ -105,11 +105,12 @@ def pass_gain(L: np.ndarray, vector: bool = False):
 
 
 def surface_samples(dyn: ToolTipDynamics, cut: Cut, rpm: float) -> int:
-    """The coarser resolution: SAMPLES_PER_PERIOD per period of the fastest mode over the
-    window's duration, at least MIN_SAMPLES."""
+    """The coarser resolution: SAMPLES_PER_PERIOD per period of the fastest relevant mode
+    (`floquet.relevant_modes`: a stiff 10 kHz mode that barely moves the tool leaves no marks to
+    resolve) over the window's duration, at least MIN_SAMPLES."""
     start, exit_ = cut.engagement_rad
     window_s = (exit_ - start) / (2.0 * math.pi * rpm / 60.0)
-    return max(MIN_SAMPLES, int(math.ceil(SAMPLES_PER_PERIOD * float(np.max(dyn.fn_hz)) * window_s)))
+    return max(MIN_SAMPLES, int(math.ceil(SAMPLES_PER_PERIOD * float(np.max(dyn.fn_hz[relevant_modes(dyn)])) * window_s)))
 
 
 def no_growth_depth(dyn: ToolTipDynamics, cut: Cut, rpm: float, upper_m: float) -> NoGrowthDepth:
