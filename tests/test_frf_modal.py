@@ -329,12 +329,16 @@ def test_fit_warns_where_a_stiffness_is_no_tool_tips(tmp_path):
     1e7 N/m mode at 500 Hz): a warning asks about the quantity; the right label gives none."""
     f = np.linspace(10.0, 2000.0, 400)
     h = 1.0 / (1e7 * (1 - (f / 500.0) ** 2 + 0.04j * f / 500.0))
-    write_frf_csv(FRFSet(f, {"h_xx": h}, pose_id="P1"), tmp_path / "acc.csv", quantity="accelerance")
+    write_frf_csv(FRFSet(f, {"h_xx": h}, pose_id="P1", pose={"x_mm": 1500.0, "y_mm": 0.0, "z_mm": 700.0, "beta_deg": 0.0}), tmp_path / "acc.csv", quantity="accelerance")
     text = (tmp_path / "acc.csv").read_text()
     (tmp_path / "mislabelled.csv").write_text(text.replace("accelerance", "receptance").replace("m/s^2/N", "m/N"))
     warned = json.loads(run_cli("fit", tmp_path / "mislabelled.csv", "--out", tmp_path / "a.csv", "--json").stdout)["warnings"]
     assert len(warned) == 1 and "softer than any milling tool tip" in warned[0] and "quantity" in warned[0]
     assert json.loads(run_cli("fit", tmp_path / "acc.csv", "--out", tmp_path / "b.csv", "--json").stdout)["warnings"] == []
+    # without a pose in any file, the table's poses are all at the origin: fit says so (a new user's table came out so silently)
+    (tmp_path / "nopose.csv").write_text("\n".join(line for line in text.splitlines() if not line.startswith(("# x_mm", "# y_mm", "# z_mm", "# beta_deg"))) + "\n")
+    warned = json.loads(run_cli("fit", tmp_path / "nopose.csv", "--out", tmp_path / "c.csv", "--json").stdout)["warnings"]
+    assert len(warned) == 1 and "no file gives its pose" in warned[0] and "# x_mm" in warned[0]
 
 
 @pytest.mark.parametrize("top_hz, above", [(3000.0, (3600.0, 0.02, 3e7)), (3000.0, (5000.0, 0.02, 3e7)), (2000.0, (2200.0, 0.02, 6e7))])

@@ -64,6 +64,9 @@ def fit(
     warnings += [f"pose {table.poses.pose_id[table.pose_index[i]]}, {table.direction[i]} mode {table.mode[i]}: k = {table.k_n_per_m[i]:.3g} N/m, "
                  f"softer than any milling tool tip ({IMPLAUSIBLE_K_N_PER_M:.0e} N/m): is the file's quantity (receptance, mobility, accelerance) right?"
                  for i in soft]
+    if not any(f.pose for f in frfs):  # (a new user's table came out at 0, 0, 0, 0 without a word)
+        warnings.append("no file gives its pose: the table's poses are all at x = y = z = 0 (by pose_id only), which `train` cannot learn from; "
+                        "give `# x_mm = ...`, `# y_mm`, `# z_mm` and `# beta_deg` (or a/b/c_deg) in each FRF file's header")
     if as_json:
         print_json({"out": str(out), "poses": summary["poses"], "modes": summary["modes"], "coupled": bool(table.cross), "warnings": warnings})
     else:
