@@ -608,3 +608,17 @@ def test_the_no_growth_depth_agrees_with_an_independent_volterra_solution():
         cut = Cut(teeth=case["N"], kt_pa=796e6, kn_pa=169e6, radial_immersion=case["aeD"], milling="up" if case["up"] else "down")
         engine = surface.no_growth_depth(dyn, cut, float(case["rpm"]), math.inf)
         assert engine.rel_error_estimate < 0.01 and engine.depth_m == pytest.approx(oracle, rel=0.005)
+
+
+def test_a_no_growth_depth_that_cannot_be_computed_leaves_the_result_standing(monkeypatch):
+    """The pass map's norm comes from ARPACK; where it fails to converge (or any numerical
+    failure), the result keeps its critical depth and says nothing of a no-growth depth."""
+    from scipy.sparse.linalg import ArpackNoConvergence
+
+    def fails(*args, **kwargs):
+        raise ArpackNoConvergence("no convergence", np.zeros(0), np.zeros((0, 0)))
+
+    monkeypatch.setattr(surface, "pass_gain", lambda *a, **k: fails())
+    dyn = ToolTipDynamics.from_modes(x=[Mode(3000.0, 0.02, 5e7)], y=[Mode(3000.0, 0.02, 5e7)])
+    result = critical_points([dyn], Cut(teeth=1, kt_pa=796e6, kn_pa=169e6, radial_immersion=0.1, milling="up"), 300.0)[0]
+    assert result.converged and result.depth_m == pytest.approx(0.1324, rel=0.01) and math.isnan(result.no_growth_depth_m)

@@ -173,7 +173,10 @@ def _with_no_growth_depth(result: StabilityResult, dyn: ToolTipDynamics, cut: Cu
     carries state it leaves out) and the depth is resolved to REL_TOL; else unchanged (NaN)."""
     if not result.free_flight_decay_efolds > SURFACE_MEMORY_EFOLDS or len(modes_carrying_over(dyn, cut, rpm)):
         return result
-    limit = surface.no_growth_depth(dyn, cut, rpm, result.depth_m)
+    try:
+        limit = surface.no_growth_depth(dyn, cut, rpm, result.depth_m)
+    except (RuntimeError, np.linalg.LinAlgError, ValueError, FloatingPointError):  # (ARPACK's no convergence is a RuntimeError): no depth, not a failed result
+        return result
     if not limit.rel_error_estimate <= REL_TOL:
         return result
     return dataclasses.replace(result, no_growth_depth_m=limit.depth_m)
