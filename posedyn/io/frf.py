@@ -114,7 +114,7 @@ def read_frf_csv(path: str | os.PathLike) -> FRFSet:
         raise InputError("a readable file", got=exc.strerror, file=name) from None
     except UnicodeDecodeError as exc:
         raise InputError("UTF-8 text", got=f"byte offset {exc.start}", file=name) from None
-    meta, meta_line, body_lines, first_line = {}, {}, [], None
+    meta, meta_line, pose, body_lines, first_line = {}, {}, {}, [], None
     for number, raw in enumerate(text.splitlines(), 1):
         stripped = raw.strip()
         if not stripped:
@@ -128,12 +128,7 @@ def read_frf_csv(path: str | os.PathLike) -> FRFSet:
                 if key in meta:
                     raise InputError(f"each header key once (already on line {meta_line[key]})", got=key, file=name, line=number, column=key)
                 if key in POSE_KEYS:
-                    try:
-                        number_value = float(value)
-                    except ValueError:
-                        raise InputError("a number", got=value.strip(), file=name, line=number, column=key) from None
-                    if not math.isfinite(number_value):
-                        raise InputError("a finite number", got=value.strip(), file=name, line=number, column=key)
+                    pose[key] = _pose_value(value, file=name, line=number, column=key)
                 meta[key], meta_line[key] = value.strip(), number
             continue
         if first_line is None:
@@ -184,8 +179,19 @@ def read_frf_csv(path: str | os.PathLike) -> FRFSet:
     _check_frequencies(f, name, line_of[1:] and [None] + line_of[1:])
     frf = {n: to_receptance(col[n + "_re"] + 1j * col[n + "_im"], f, quantity) for n in names}
     coherence = {n: col[n + "_coh"] for n in names if n + "_coh" in col}
-    pose = {k: float(meta[k]) for k in POSE_KEYS if k in meta}
     return FRFSet(frequency_hz=f, frf=frf, coherence=coherence, pose_id=meta.get("pose_id", path.stem), pose=pose, source=name)
+
+
+def _pose_value(text: str, **where) -> float:
+    """A pose key's value in an FRF file (CSV header or UFF id2): a finite number, else an
+    InputError at `where`."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise InputError("a number", got=text.strip(), **where) from None
+    if not math.isfinite(value):
+        raise InputError("a finite number", got=text.strip(), **where)
+    return value
 
 
 def write_frf_csv(frfs: FRFSet, path: str | os.PathLike, quantity: str = "receptance") -> None:
@@ -264,12 +270,7 @@ def read_frf_uff(path: str | os.PathLike) -> FRFSet:
             if sep and k_.strip() == "pose_id":
                 pose_id = v.strip()
             elif sep and k_.strip() in POSE_KEYS:
-                try:
-                    pose[k_.strip()] = float(v)
-                except ValueError:
-                    raise InputError("a number", got=v.strip(), file=name, row=k, column=f"id2 {k_.strip()}") from None
-                if not math.isfinite(pose[k_.strip()]):
-                    raise InputError("a finite number", got=v.strip(), file=name, row=k, column=f"id2 {k_.strip()}")
+                pose[k_.strip()] = _pose_value(v, file=name, row=k, column=f"id2 {k_.strip()}")
     return FRFSet(frequency_hz=f, frf=frf, pose_id=pose_id, pose=pose, source=name)
 
 

@@ -49,6 +49,12 @@ class StabilityResult:
     free_flight_decay_efolds: float = math.nan  # `free_flight_decay` (NaN without a chatter frequency)
     no_growth_depth_m: float = math.nan  # `surface.no_growth_depth` where only the surface remembers the last pass (else NaN)
 
+    @property
+    def surface_memory(self) -> bool:
+        """Whether the chattering mode's vibration dies out between cuts (`free_flight_decay` above
+        SURFACE_MEMORY_EFOLDS): the depth is then an asymptotic boundary only."""
+        return self.free_flight_decay_efolds > SURFACE_MEMORY_EFOLDS
+
     def accuracy_json(self) -> dict:
         out = {"method": self.method, "converged": self.converged,
                "rel_error_estimate": self.rel_error_estimate if math.isfinite(self.rel_error_estimate) else None,
@@ -171,7 +177,7 @@ def _with_no_growth_depth(result: StabilityResult, dyn: ToolTipDynamics, cut: Cu
     (`floquet.relevant_modes`) decay by more than SURFACE_MEMORY_EFOLDS between cuts (the pass
     map's premise: each pass starts from rest; a robot mode that keeps vibrating between cuts
     carries state it leaves out) and the depth is resolved to REL_TOL; else unchanged (NaN)."""
-    if not result.free_flight_decay_efolds > SURFACE_MEMORY_EFOLDS or len(modes_carrying_over(dyn, cut, rpm)):
+    if not result.surface_memory or len(modes_carrying_over(dyn, cut, rpm)):
         return result
     try:
         limit = surface.no_growth_depth(dyn, cut, rpm, result.depth_m)

@@ -63,32 +63,56 @@ class NoGrowthDepth:
 def surface_map(dyn: ToolTipDynamics, cut: Cut, rpm: float, depth_m: float, samples: int) -> np.ndarray:
     """L(a), (samples, samples): the surface h_(j+1) at the middles of `samples` equal sub-steps of
     the cut window from h_j at the same points (lower triangular: causal)."""
+    return _pass_map(_pass_parts(dyn, cut, rpm, samples), depth_m)
+
+
+@dataclass(frozen=True)
+class _PassParts:
+    """What L(a) needs at one resolution that does not depend on the depth a (balanced state of
+    `floquet`): A0, the sub-steps' W / a and input f / a, state -> surface rows, half sub-step (s)."""
+
+    A0: np.ndarray
+    W: np.ndarray  # (samples, n, n)
+    drive: np.ndarray  # (samples, n)
+    out: np.ndarray  # (samples, 2n)
+    half_step_s: float
+
+
+def _pass_parts(dyn: ToolTipDynamics, cut: Cut, rpm: float, samples: int) -> _PassParts:
     start, exit_ = cut.engagement_rad
     edges = np.linspace(start, exit_, samples + 1)
     lo, hi = edges[:-1], edges[1:]
     middle = 0.5 * (lo + hi)
     char = FloquetCharacteristic(dyn, cut, 1.0)  # (its balanced state and W; its segments unused)
-    n, n2 = char.n, 2 * char.n
     H = engaged_integral(cut, lo, hi) / (hi - lo)[:, None, None]
     mean_cos = (np.sin(hi) - np.sin(lo)) / (hi - lo)
     mean_sin = (np.cos(lo) - np.cos(hi)) / (hi - lo)
     f = np.stack([cut.kt_pa * mean_cos + cut.kn_pa * mean_sin, -cut.kt_pa * mean_sin + cut.kn_pa * mean_cos], -1)
-    W = np.einsum("ir,sij,jq->srq", char.force_shapes, H, char.shapes) / char.scale[None, None, :]
+    return _PassParts(
+        A0=char.A0,
+        W=np.einsum("ir,sij,jq->srq", char.force_shapes, H, char.shapes) / char.scale[None, None, :],
+        drive=f @ char.force_shapes,
+        out=np.stack([np.sin(middle), np.cos(middle)], -1) @ char.S,
+        half_step_s=(exit_ - start) / samples / (2.0 * math.pi * rpm / 60.0) / 2.0,
+    )
+
+
+def _pass_map(parts: _PassParts, depth_m: float) -> np.ndarray:
+    samples, n = parts.drive.shape
+    n2 = 2 * n
     generator = np.zeros((samples, n2 + 1, n2 + 1))
-    generator[:, :n2, :n2] = char.A0
-    generator[:, n:n2, :n] -= depth_m * W
-    generator[:, n:n2, n2] = depth_m * (f @ char.force_shapes)
-    half_step = (exit_ - start) / samples / (2.0 * math.pi * rpm / 60.0) / 2.0
-    augmented = sdm.expm_batched(generator * half_step)
+    generator[:, :n2, :n2] = parts.A0
+    generator[:, n:n2, :n] -= depth_m * parts.W
+    generator[:, n:n2, n2] = depth_m * parts.drive
+    augmented = sdm.expm_batched(generator * parts.half_step_s)
     E, g = augmented[:, :n2, :n2], augmented[:, :n2, n2]
-    out = np.stack([np.sin(middle), np.cos(middle)], -1) @ char.S  # (samples, 2n): state -> surface
     Z = np.zeros((n2, samples))  # state response to each surface sample so far
     L = np.zeros((samples, samples))
     for i in range(samples):
         Zi = Z[:, : i + 1]
         Zi[:] = E[i] @ Zi
         Zi[:, i] += g[i]
-        L[i, : i + 1] = out[i] @ Zi
+        L[i, : i + 1] = parts.out[i] @ Zi
         Zi[:] = E[i] @ Zi
         Zi[:, i] += g[i]
     return L
@@ -125,17 +149,17 @@ def no_growth_depth(dyn: ToolTipDynamics, cut: Cut, rpm: float, upper_m: float) 
     depths = []
     guess = 0.1 * upper_m if math.isfinite(upper_m) else 1e-3  # (L is about proportional to the depth: any start will do)
     for count in (samples, 2 * samples):
-        depth = _unit_gain(dyn, cut, rpm, count, guess, upper_m)
+        depth = _unit_gain(_pass_parts(dyn, cut, rpm, count), guess, upper_m)
         depths.append(depth)
         guess = depth
     return NoGrowthDepth(depths[1], abs(depths[1] - depths[0]) / depths[1], 2 * samples)
 
 
-def _unit_gain(dyn, cut, rpm, samples, guess, upper):
+def _unit_gain(parts: _PassParts, guess, upper):
     """Secant on ln ||L(a)|| against ln a (nearly linear: L is about proportional to a below the
     boundary) from `guess`, capped at `upper`."""
     def log_gain(a):
-        return math.log(pass_gain(surface_map(dyn, cut, rpm, a, samples)))
+        return math.log(pass_gain(_pass_map(parts, a)))
 
     x0, y0 = math.log(guess), log_gain(guess)
     x1 = x0 - y0  # slope 1

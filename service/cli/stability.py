@@ -20,7 +20,7 @@ from posedyn.errors import InputError
 from posedyn.io import read_modal_table
 from posedyn.io.atomic import write_text_atomic
 from posedyn.stability import (
-    SURFACE_MEMORY_EFOLDS, Cut, Discretization, StabilityModel, StabilityResult, absolute_limit, critical_lobes, critical_points, free_flight_decay,
+    Cut, Discretization, StabilityModel, StabilityResult, absolute_limit, critical_lobes, critical_points, free_flight_decay,
     modes_carrying_over, zoa,
 )
 from posedyn.stability.cutting import check_rpm
@@ -143,9 +143,8 @@ def chatter(
             verdict += "; the critical depth did NOT converge: not assured"
         table.add_row(f"at {depth_mm:g} mm", verdict if steps is None else f"spectral radius {out['spectral_radius']:.6f} ({verdict})")
     console.print(table)
-    efolds = out["free_flight_decay_efolds"]
-    if efolds is not None and efolds > SURFACE_MEMORY_EFOLDS:
-        note = (f"note: between cuts the chattering mode's vibration decays by e^-{efolds:.0f}: only the surface remembers the last pass, and the "
+    if result.surface_memory:
+        note = (f"note: between cuts the chattering mode's vibration decays by e^-{result.free_flight_decay_efolds:.0f}: only the surface remembers the last pass, and the "
                 "critical depth is the asymptotic (Floquet) boundary; ")
         if out["no_growth_depth_mm"] is not None:
             note += (f"from {out['no_growth_depth_mm']:.3g} mm a perturbation of the surface can grow for many passes before it decays, and below "

@@ -29,7 +29,7 @@ from posedyn.io.twin_file import load_twin
 from posedyn.posemodel import PoseModel
 from posedyn.robot import Robot, TwinParameters, tool_pose
 from posedyn.sle import SleCut, sle_m
-from posedyn.stability import SURFACE_MEMORY_EFOLDS, critical_lobes
+from posedyn.stability import critical_lobes
 from posedyn.table import PoseSet
 from service.sweep.spec import RESULT_COLUMNS, SweepSpec
 
@@ -133,7 +133,7 @@ def _result_columns(result) -> dict:
         flags.append("force_limit")
     if result.stability.converged is False or result.stability_with_absorber.converged is False:
         flags.append("stability_not_converged")
-    if result.stability.free_flight_decay_efolds > SURFACE_MEMORY_EFOLDS:  # the depth is an asymptotic boundary only (`free_flight_decay`)
+    if result.stability.surface_memory:  # the depth is an asymptotic boundary only (`free_flight_decay`)
         flags.append("surface_memory")
     errors = [r.rel_error_estimate for r in (result.stability, result.stability_with_absorber) if math.isfinite(r.rel_error_estimate)]
     row.update(
