@@ -13,7 +13,7 @@ this run; no thresholds are asserted (machines are noisy), the targets are print
       first-order semi-discretization at the 640 steps it needs to come within 2 % (on the four
       spindle modes alone, which flatters it: with all eight modes it takes minutes; --full-sdm)
 
-Usage: python bench/stability.py [--immersion 1.0] [--baseline-points N]
+Usage: python bench/stability.py [--immersion 1.0] [--baseline-points N] [--only-multiscale] [--default-heap]
   --baseline-points N runs the dense baseline on N random map points (default: all 20000) and
   scales its time to the full map.
 """
@@ -33,6 +33,7 @@ from posedyn.dynamics import ToolTipDynamics
 from posedyn.io import read_modal_table
 from posedyn.stability import Cut, Discretization, StabilityModel, critical_lobes, critical_points, reference
 from posedyn.table import Mode
+from service.heap import keep_freed_memory
 
 
 def bench_map(immersion: float, baseline_points: int | None) -> None:
@@ -154,7 +155,10 @@ def main() -> None:
     parser.add_argument("--baseline-points", type=int, default=None)
     parser.add_argument("--full-sdm", action="store_true", help="(e) with all eight modes in the semi-discretization (minutes)")
     parser.add_argument("--only-multiscale", action="store_true", help="run (e) alone")
+    parser.add_argument("--default-heap", action="store_true", help="leave glibc's heap thresholds as they are (the CLI keeps freed memory: service.heap)")
     args = parser.parse_args()
+    kept = False if args.default_heap else keep_freed_memory()
+    print(f"heap: {'freed memory kept, as in the CLI and the sweep workers (service.heap)' if kept else 'glibc defaults'}")
     if not args.only_multiscale:
         bench_map(args.immersion, args.baseline_points)
         bench_pose()

@@ -18,6 +18,7 @@ from absorber.tuning import known_tunings
 from posedyn import __version__
 from posedyn.errors import InputError
 from service.cli import absorber, control, data, fit, gap, plan, posemodel, serve, sle, stability, sweep, tool, twin
+from service.heap import keep_freed_memory
 
 app = typer.Typer(
     help="Pose-dependent tool-tip dynamics, chatter prediction and absorber/controller schedules for robotic milling.",
@@ -59,6 +60,7 @@ def _root(
 
 
 def main(argv: Optional[list[str]] = None) -> None:
+    keep_freed_memory()  # the stability engine's temporaries reuse the heap (service.heap)
     load_tuning_cache()  # absorber optima of earlier runs (seconds each to recompute)
     known = len(known_tunings())
     try:

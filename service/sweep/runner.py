@@ -23,6 +23,7 @@ from pathlib import Path
 from posedyn.errors import InputError
 from posedyn.io.atomic import write_text_atomic
 from posedyn.table import PoseSet
+from service.heap import HEAP_ENVIRON
 from service.sweep.chunk import compute_chunk, context, representative_lobes
 from service.sweep.spec import RESULT_COLUMNS, SweepSpec, read_sweep_poses
 import hashlib
@@ -99,11 +100,11 @@ def _dask(workers: int | None, scheduler: str | None):
     logging.getLogger("distributed").setLevel(logging.ERROR)
     # Dask's default worker environment sets MALLOC_TRIM_THRESHOLD_=64 KiB, which also turns off
     # glibc's dynamic mmap threshold: every large temporary array is then mmap'd and unmapped and
-    # the batched stability work runs 2.7x slower. Workers here keep their heap instead (mmap
-    # only above 256 MiB, trim above 1 GiB, one arena for the task thread and the event loop):
-    # 21 ms per pose in a worker against 26 ms with Dask's setting (17 ms in a plain process).
+    # the batched stability work runs 2.7x slower (a chunk in one process: 202 ms a pose against
+    # 107). Workers here keep their heap instead (`service.heap`, and one arena for the task
+    # thread and the event loop).
     environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
-    environ.update(MALLOC_TRIM_THRESHOLD_=1 << 30, MALLOC_MMAP_THRESHOLD_=1 << 28, MALLOC_ARENA_MAX=1)
+    environ.update(HEAP_ENVIRON, MALLOC_ARENA_MAX=1)
     dask.config.set({"distributed.nanny.pre-spawn-environ": environ})
     if scheduler:
         client, cluster = Client(scheduler), None
