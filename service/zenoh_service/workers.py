@@ -24,6 +24,7 @@ from posedyn.io.cut import read_cut
 from posedyn.io.model_dir import load_model
 from posedyn.io.tool_file import read_tool
 from posedyn.io.twin_file import load_twin
+from service.heap import keep_freed_memory
 from service.zenoh_service.engine import ScheduleEngine, model_version
 from service.zenoh_service.protocol import RequestError
 
@@ -68,6 +69,7 @@ def _start_worker(spec: EngineSpec) -> None:
     from threadpoolctl import threadpool_limits  # noqa: PLC0415 - in the worker only
 
     threadpool_limits(1)  # one core per worker: BLAS threads would compete with the service's process
+    keep_freed_memory()  # a spawned worker starts with glibc's thresholds (service.heap)
     global _engine
     _engine = spec.build()
     load_tuning_cache()  # the virtual absorber's optima of earlier runs: seconds each otherwise
