@@ -5,8 +5,8 @@ glibc maps every block above M_MMAP_THRESHOLD on its own and gives memory at the
 back above M_TRIM_THRESHOLD; both start at 128 KiB and rise only once a large mapped block has
 been freed. The engine's temporaries (a batch of segment exponentials, 0.2-2 MB) were then
 mapped, zero-filled by the kernel page by page on first touch and unmapped again, call after
-call: the issue-17 pose at one speed took 55 ms in a fresh process and 44 ms with the heap kept
-(its matrix exponentials 2.4x faster). The CLI keeps it from its start, the schedule service's
+call: the issue-17 pose at one speed took 52-56 ms in a fresh process and 45 ms with the heap
+kept (its matrix exponentials 2.4x faster). The CLI keeps it from its start, the schedule service's
 spawned workers from theirs; Dask sweep workers get the same through their environment
 (`service.sweep.runner`). A library user's own process can call `keep_freed_memory` too.
 Elsewhere than glibc nothing changes."""
