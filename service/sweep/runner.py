@@ -100,7 +100,7 @@ def _dask(workers: int | None, scheduler: str | None):
     logging.getLogger("distributed").setLevel(logging.ERROR)
     # Dask's default worker environment sets MALLOC_TRIM_THRESHOLD_=64 KiB, which also turns off
     # glibc's dynamic mmap threshold: every large temporary array is then mmap'd and unmapped and
-    # the batched stability work runs 2.7x slower (a chunk in one process: 202 ms a pose against
+    # the batched stability work runs 1.9x slower (a chunk in one process: 202 ms a pose against
     # 107). Workers here keep their heap instead (`service.heap`, and one arena for the task
     # thread and the event loop).
     environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
