@@ -7,7 +7,8 @@ been freed. The engine's temporaries (a batch of segment exponentials, 0.2-2 MB)
 mapped, zero-filled by the kernel page by page on first touch and unmapped again, call after
 call: the issue-17 pose at one speed took 52-56 ms in a fresh process and 45 ms with the heap
 kept (its matrix exponentials 2.4x faster). The CLI keeps it from its start, the schedule service's
-spawned workers from theirs; Dask sweep workers get the same through their environment
+spawned workers from theirs; Dask sweep workers when they read a sweep's inputs
+(`service.sweep.chunk.context`), those of a local cluster already through their environment
 (`service.sweep.runner`). A library user's own process can call `keep_freed_memory` too.
 Elsewhere than glibc nothing changes."""
 
