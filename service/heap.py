@@ -7,8 +7,7 @@ been freed. The engine's temporaries (a batch of segment exponentials, 0.2-2 MB)
 mapped, zero-filled by the kernel page by page on first touch and unmapped again, call after
 call: the issue-17 pose at one speed took 52-56 ms in a fresh process and 45 ms with the heap
 kept (its matrix exponentials 2.4x faster). The CLI keeps it from its start, the schedule service's
-spawned workers from theirs; Dask sweep workers when they read a sweep's inputs
-(`service.sweep.chunk.context`), those of a local cluster already through their environment
+spawned workers from theirs, Dask sweep workers (local or a scheduler's) from a worker plugin
 (`service.sweep.runner`). A library user's own process can call `keep_freed_memory` too.
 Elsewhere than glibc nothing changes."""
 
@@ -16,6 +15,7 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import functools
 
 #: Freed memory at the top of the heap that is kept (glibc's M_TRIM_THRESHOLD): the process stays
 #: at its peak instead of shrinking after it.
@@ -24,14 +24,13 @@ TRIM_THRESHOLD_BYTES = 1 << 30
 #: 300-speed lobes' batches (30-40 MB) too (8.8 s in one process, 7.5-8.0 s with them kept, 8.0 s
 #: with 32 MiB).
 MMAP_THRESHOLD_BYTES = 1 << 28
-#: The same for a child process's environment (glibc reads it when the process starts).
-HEAP_ENVIRON = {"MALLOC_TRIM_THRESHOLD_": str(TRIM_THRESHOLD_BYTES), "MALLOC_MMAP_THRESHOLD_": str(MMAP_THRESHOLD_BYTES)}
 
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
 
 
+@functools.cache
 def keep_freed_memory() -> bool:
-    """Set this process's trim and mmap thresholds (above); True where glibc took both."""
+    """Set this process's trim and mmap thresholds (above), once; True where glibc took both."""
     name = ctypes.util.find_library("c")
     try:
         libc = ctypes.CDLL(name)

@@ -31,7 +31,6 @@ from posedyn.robot import Robot, TwinParameters, tool_pose
 from posedyn.sle import SleCut, sle_m
 from posedyn.stability import critical_lobes
 from posedyn.table import PoseSet
-from service.heap import keep_freed_memory
 from service.sweep.spec import RESULT_COLUMNS, SweepSpec
 
 
@@ -51,7 +50,6 @@ class SweepContext:
 @lru_cache(maxsize=4)
 def context(spec_json: str, grid_twin: str | None = None) -> SweepContext:
     spec = SweepSpec(**json.loads(spec_json))
-    keep_freed_memory()  # once per worker process (service.heap): also a --scheduler's workers, which the runner's environment does not reach
     load_tuning_cache()  # once per worker process: the virtual absorber's optima of earlier runs
     cut, rpm, _ = read_cut(spec.cut)
     control = read_actuator(Path(spec.actuator) if spec.actuator else None)

@@ -23,7 +23,7 @@ from pathlib import Path
 from posedyn.errors import InputError
 from posedyn.io.atomic import write_text_atomic
 from posedyn.table import PoseSet
-from service.heap import HEAP_ENVIRON
+from service.heap import keep_freed_memory
 from service.sweep.chunk import compute_chunk, context, representative_lobes
 from service.sweep.spec import RESULT_COLUMNS, SweepSpec, read_sweep_poses
 import hashlib
@@ -97,20 +97,28 @@ def _dask(workers: int | None, scheduler: str | None):
 
     import dask  # heavy: only when there is work
 
+    from distributed.diagnostics.plugin import WorkerPlugin  # as above
+
+    class KeepFreedMemory(WorkerPlugin):
+        def setup(self, worker):
+            keep_freed_memory()
+
     logging.getLogger("distributed").setLevel(logging.ERROR)
     # Dask's default worker environment sets MALLOC_TRIM_THRESHOLD_=64 KiB, which also turns off
     # glibc's dynamic mmap threshold: every large temporary array is then mmap'd and unmapped and
     # the batched stability work runs 1.9x slower (a chunk in one process: 202 ms a pose against
-    # 107). Workers here keep their heap instead (`service.heap`, and one arena for the task
-    # thread and the event loop).
+    # 107). Every worker, local or a scheduler's, joining now or later, keeps its heap instead
+    # (`service.heap`, a worker plugin); a local one also has one arena for the task thread and
+    # the event loop.
     environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
-    environ.update(HEAP_ENVIRON, MALLOC_ARENA_MAX=1)
+    environ.update(MALLOC_ARENA_MAX=1)
     dask.config.set({"distributed.nanny.pre-spawn-environ": environ})
     if scheduler:
         client, cluster = Client(scheduler), None
     else:
         cluster = LocalCluster(n_workers=workers or 2, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR)
         client = Client(cluster)
+    client.register_plugin(KeepFreedMemory(), name="posedyn-keep-freed-memory")
     try:
         yield client
     finally:
