@@ -118,8 +118,8 @@ def _dask(workers: int | None, scheduler: str | None):
     else:
         cluster = LocalCluster(n_workers=workers or 2, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR)
         client = Client(cluster)
-    client.register_plugin(KeepFreedMemory(), name="posedyn-keep-freed-memory")
     try:
+        client.register_plugin(KeepFreedMemory(), name="posedyn-keep-freed-memory")
         yield client
     finally:
         client.close()
