@@ -1459,7 +1459,9 @@ def _interpolated_sample(coef: np.ndarray, bound: float, t: np.ndarray, scales=N
     n2 = coef.shape[-1]
     nu = np.exp(-1j * t)
     x = nu if scales is None else (1.0 - np.asarray(scales, dtype=float)[:, None] * (1.0 - nu)).reshape(-1)
-    D = np.eye(n2) - np.resize(nu, len(x))[:, None, None] * _polynomial_matrices(coef, x)
+    D = _polynomial_matrices(coef, x)
+    D *= -np.resize(nu, len(x))[:, None, None]
+    D.reshape(len(x), -1)[:, :: n2 + 1] += 1.0  # I - nu P(x), in place
     with np.errstate(all="ignore"):
         sign, logdet = np.linalg.slogdet(D)
         limit = INTERP_SAFE / (np.sqrt(n2) * np.float64(bound))  # inf for an exact interpolant

@@ -296,10 +296,9 @@ def expm_batched(A: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
 def _expm_block(A: np.ndarray) -> np.ndarray:
     norm = np.max(np.abs(A).sum(axis=1))
     squarings = max(0, int(np.ceil(np.log2(norm / THETA18)))) if norm > 0 else 0
-    if squarings:
-        A = A * 0.5**squarings
-    powers = np.empty((4,) + A.shape, dtype=A.dtype)  # A, A^2, A^3, A^6
-    powers[0] = A
+    powers = np.empty((4,) + A.shape, dtype=A.dtype)  # A, A^2, A^3, A^6 (A scaled)
+    np.multiply(A, 0.5**squarings, out=powers[0])
+    A = powers[0]
     np.matmul(A, A, out=powers[1])
     np.matmul(powers[1], A, out=powers[2])
     np.matmul(powers[2], powers[2], out=powers[3])
@@ -308,8 +307,8 @@ def _expm_block(A: np.ndarray) -> np.ndarray:
         B = (_BBC18[:, 1:] @ flat.view(np.float64)).view(flat.dtype).reshape((5,) + A.shape)
     else:
         B = (_BBC18[:, 1:] @ flat).reshape((5,) + A.shape)
-    diagonal = np.arange(A.shape[-1])
-    B[:, :, diagonal, diagonal] += _BBC18[:, :1, None]  # and of I
+    n = A.shape[-1]
+    B.reshape(5, len(A), n * n)[:, :, :: n + 1] += _BBC18[:, :1, None]  # and of I (the diagonals, a strided view)
     A9 = B[0] @ B[4]
     A9 += B[3]
     B[2] += A9
