@@ -1,0 +1,101 @@
+"""Boundary points are zeros of det(I - nu M) (`floquet._genuine`, `floquet.floquet_vectors`).
+
+Where the modes die out between cuts (a few percent immersion at 200-400 rpm: 100-160 e-folds
+of free flight), M is graded (singular values from 20 down to 1e-54) and far from normal:
+LAPACK's eigenvectors of it can be wrong (residual |M z - mu z| = |z|), its eigenvalues are
+known to about 1e-3, and Newton on them settled where det D is regular. A blind check (an
+independent C time stepper with exact modal propagators, the delay an integer number of steps,
+ARPACK on its tooth-period map and time simulations at 0.95 / 1.05 x, written without reading
+the engine; 88 random cases) found three such cases; its figures are the references here.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from posedyn.dynamics import ToolTipDynamics
+from posedyn.stability import Cut, critical_points, floquet
+from posedyn.table import Mode
+
+# (direction, fn_hz, zeta, k_n_per_m) as the blind check wrote them
+H008 = [
+    ("x", 19.50616989187957, 0.026522984876427257, 46923974.97023674),
+    ("x", 9620.292442546719, 0.026106892208372943, 25053799.871852383),
+    ("x", 1859.5672816981566, 0.014316728353885713, 1545149147.0912375),
+    ("y", 7.882033389416155, 0.04537098484162097, 5851637.491423887),
+    ("y", 23.021793045744722, 0.03241727076578171, 3531411.8646450066),
+    ("y", 1846.2915284818835, 0.025129392700198396, 52906332.727856316),
+]
+G013 = [
+    ("x", 5.804586837210627, 0.02628325847038132, 4901954.09152376),
+    ("x", 4.174233767441931, 0.039140817617342095, 2072822.4716744144),
+    ("x", 8063.046383605552, 0.016011093336554927, 81212228.2703585),
+    ("x", 2405.557214838238, 0.021000071742775475, 1135900732.3912227),
+    ("y", 17.97210946477643, 0.025931725699132088, 26616862.36849693),
+    ("y", 9.357543740821978, 0.03928743108728835, 17537489.81955023),
+    ("y", 7043.750454955649, 0.01520248236222554, 15306242.109292574),
+    ("y", 9086.669701638719, 0.02811119968640343, 6501506568.176783),
+]
+G025 = [
+    ("x", 9492.578263619322, 0.021171243828241117, 26706455.183057748),
+    ("y", 7.425703810839614, 0.03797889563967048, 5279342.65618404),
+    ("y", 19.97341998955579, 0.021327286659789724, 23615882.282039583),
+    ("y", 9709.154404278132, 0.02687217518426349, 60568103.91649865),
+    ("y", 5326.259198033834, 0.012249882321233845, 19244393.777959332),
+]
+
+
+def structure(rows):
+    return ToolTipDynamics.from_modes(x=[Mode(f, z, k) for d, f, z, k in rows if d == "x"], y=[Mode(f, z, k) for d, f, z, k in rows if d == "y"])
+
+
+def test_depth_does_not_depend_on_the_order_of_the_modes():
+    """h008 (264.3 rpm, 2 teeth, a/D 0.0351, down): the blind check's boundary is 11.363 mm (its
+    simulation decays at 0.95 x and grows at 1.05 x of 11.368). Before: 10.67 mm, 'converged',
+    with the x modes first, 11.37 mm with the table's order."""
+    cut = Cut(teeth=2, kt_pa=665.2e6, kn_pa=179.7e6, radial_immersion=0.0351, milling="down")
+    xs_first = structure(H008)
+    mixed = ToolTipDynamics.from_modes(
+        x=[Mode(f, z, k) for d, f, z, k in H008 if d == "x"][::-1], y=[Mode(f, z, k) for d, f, z, k in H008 if d == "y"][::-1]
+    )
+    a, b = critical_points([xs_first, mixed], cut, 264.3)
+    assert a.converged and b.converged
+    assert a.depth_m == pytest.approx(b.depth_m, rel=5e-3)
+    assert a.depth_m == pytest.approx(11.363e-3, rel=0.02)
+
+
+def test_chatter_frequency_of_a_graded_monodromy():
+    """g013 (394.8 rpm, 2 teeth, a/D 0.0232, down): the blind check's eigenvector and its
+    simulation at 1.05 x both chatter at 7089.1 Hz, by the soft 7044 Hz y mode; the engine said
+    9084.6 Hz, beside a y mode of k = 6.5e9 N/m that carries 0.1 % of that amplitude."""
+    cut = Cut(teeth=2, kt_pa=1979.9e6, kn_pa=548.7e6, radial_immersion=0.0232, milling="down")
+    r = critical_points([structure(G013)], cut, 394.8)[0]
+    assert r.converged
+    assert r.depth_m == pytest.approx(1.5729e-3, rel=0.02)
+    assert r.chatter_hz == pytest.approx(7089.1, abs=13.2)  # within one tooth-passing frequency
+
+
+def test_a_point_where_det_d_is_regular_is_moved_to_its_zero():
+    """g025 (319.2 rpm, 2 teeth, a/D 0.0517, down): the engine's point had theta 0.768 where
+    det(I - nu M) is 0.42 in modulus; the zero at that depth is at theta 1.805. The blind check:
+    boundary 1.6706 mm, chatter 5359.5 Hz (eigenvector and simulation alike)."""
+    cut = Cut(teeth=2, kt_pa=1536.5e6, kn_pa=524.7e6, radial_immersion=0.0517, milling="down")
+    r = critical_points([structure(G025)], cut, 319.2)[0]
+    assert r.converged
+    assert r.depth_m == pytest.approx(1.6706e-3, rel=0.02)
+    assert r.chatter_hz == pytest.approx(5359.5, abs=10.7)
+
+
+def test_floquet_vector_is_the_eigenvector_where_m_is_well_conditioned():
+    """On an ordinary structure the SVD's null vector of I - nu M is M's eigenvector for 1 / nu."""
+    dyn = structure([("x", 600.0, 0.03, 2e7), ("y", 650.0, 0.03, 2.5e7)])
+    cut = Cut(teeth=3, kt_pa=800e6, kn_pa=200e6, radial_immersion=0.5, milling="down")
+    p = floquet.critical_depth(dyn, cut, 6000.0)
+    char = floquet.FloquetCharacteristic(dyn, cut, p.substeps_per_rad)
+    tau = float(cut.tooth_period_s(6000.0))
+    z, ok = floquet.floquet_vectors(char, np.array([p.depth_m]), np.array([p.theta_rad]), np.array([tau]))
+    nu = np.exp(-1j * p.theta_rad)
+    M = char.monodromy(np.array([p.depth_m * (1 - nu)]), np.array([tau]))[0]
+    assert ok[0]
+    assert np.linalg.norm(M @ z[0] - z[0] / nu) < 1e-6 * np.abs(M).max()
