@@ -1542,35 +1542,24 @@ def _winding(sample, th, max_points):
 
 # --- chatter frequency --------------------------------------------------------------------------
 
-#: A boundary point's Floquet vector is the null vector of D = I - nu M(a (1 - nu)) where D's
-#: smallest singular value is below NULL_GAP x the next (a simple zero of det D).
-NULL_GAP = 1e-3
-#: Where it is not, thetas scanned at the point's depth for the zero (`_relocate`), and the
+#: A boundary point's Floquet vector is the null vector of D = I - nu M(a (1 - nu))
+#: (`sdm.null_vectors`: where D's smallest singular value is below sdm.NULL_GAP x the next, a
+#: simple zero of det D). Where it is not, thetas scanned at the point's depth for the zero (`_relocate`), and the
 #: Newton iterations on det D that follow from the best of them.
 RELOCATE_POINTS = 128
 RELOCATE_ITERATIONS = 8
 
 
 def floquet_vectors(char: FloquetCharacteristic, a, theta, tau):
-    """(z, ok) at boundary points: z (B, 2n) the unit right singular vector of the smallest
-    singular value of D = I - nu M(a (1 - nu)), nu = exp(-i theta), which is the Floquet
-    solution's state at the period start (M z = z / nu); ok where that singular value is below
-    NULL_GAP x the next (D has a simple null vector there). The SVD, not LAPACK's eigenvectors:
-    where the modes die out between cuts M is graded (singular values from 20 down to 1e-54) and
-    the eigenvector geev returned for the eigenvalue at 1 / nu had a residual |M z - z / nu| of
-    |z| (balancing; a blind check's chatter frequencies at 9085 Hz, a mode with k = 6.5e9 N/m,
-    where the independent simulation chatters at 7089 Hz)."""
+    """(z, ok) at boundary points (`sdm.null_vectors` of D = I - nu M(a (1 - nu)), nu =
+    exp(-i theta)): z (B, 2n) the Floquet solution's state at the period start (M z = z / nu),
+    ok where D has a simple null vector. Not LAPACK's eigenvectors of M: a blind check's chatter
+    frequencies came out at 9085 Hz, beside a mode of k = 6.5e9 N/m, where the independent
+    simulation chatters at 7089 Hz (geev's vector had a residual |M z - z / nu| of |z|)."""
     nu = np.exp(-1j * np.asarray(theta, dtype=float))
-    M = char.monodromy(np.asarray(a, dtype=float) * (1.0 - nu), tau)
     with np.errstate(all="ignore"):
-        D = np.eye(M.shape[-1]) - nu[:, None, None] * M
-        if not np.all(np.isfinite(D)):
-            bad = ~np.all(np.isfinite(D), axis=(1, 2))
-            D[bad] = np.eye(M.shape[-1])
-        else:
-            bad = np.zeros(len(D), bool)
-        _, sv, vh = np.linalg.svd(D)
-    return np.conj(vh[:, -1, :]), (sv[:, -1] <= NULL_GAP * sv[:, -2]) & ~bad
+        M = char.monodromy(np.asarray(a, dtype=float) * (1.0 - nu), tau)
+        return sdm.null_vectors(np.eye(M.shape[-1]) - nu[:, None, None] * M)
 
 
 def _relocate(char: FloquetCharacteristic, a: float, tau: float, theta: float | None = None):
