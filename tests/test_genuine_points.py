@@ -99,3 +99,18 @@ def test_floquet_vector_is_the_eigenvector_where_m_is_well_conditioned():
     M = char.monodromy(np.array([p.depth_m * (1 - nu)]), np.array([tau]))[0]
     assert ok[0]
     assert np.linalg.norm(M @ z[0] - z[0] / nu) < 1e-6 * np.abs(M).max()
+
+
+@pytest.mark.parametrize("order", [(3, 2, 1, 0), (2, 3, 0, 1)])
+def test_a_higher_zero_is_not_the_answer_in_any_order(order):
+    """g025 with its y rows in other orders: the engine gave 4.26 and 3.73 mm (not converged),
+    where the second blind check's multiplier is 2.29 and 2.01 (chattering hard); its boundary
+    lies between 1.6664 and 1.6764 mm. A zero of det D whose count shows a branch below is
+    replaced by the lowest zero under it (`_count_bracket`, Newton on det D)."""
+    cut = Cut(teeth=2, kt_pa=1536.5e6, kn_pa=524.7e6, radial_immersion=0.0517, milling="down")
+    ys = [r for r in G025 if r[0] == "y"]
+    rows = [r for r in G025 if r[0] == "x"] + [ys[i] for i in order]
+    r = critical_points([structure(rows)], cut, 319.2)[0]
+    assert r.converged
+    assert 1.6664e-3 * 0.99 <= r.depth_m <= 1.6764e-3 * 1.01
+    assert r.chatter_hz == pytest.approx(5359.5, abs=10.7)

@@ -1544,10 +1544,11 @@ def _winding(sample, th, max_points):
 
 #: A boundary point's Floquet vector is the null vector of D = I - nu M(a (1 - nu))
 #: (`sdm.null_vectors`: where D's smallest singular value is below sdm.NULL_GAP x the next, a
-#: simple zero of det D). Where it is not, thetas scanned at the point's depth for the zero (`_relocate`), and the
-#: Newton iterations on det D that follow from the best of them.
+#: simple zero of det D). Where it is not (`_genuine`): thetas scanned for Newton on det D
+#: (`_newton_on_determinant`), and how close (relative) the count's bracket of a crossing below
+#: is taken before Newton starts from its top.
 RELOCATE_POINTS = 128
-RELOCATE_ITERATIONS = 8
+RELOCATE_BRACKET = 1e-3
 
 
 def floquet_vectors(char: FloquetCharacteristic, a, theta, tau):
@@ -1562,72 +1563,60 @@ def floquet_vectors(char: FloquetCharacteristic, a, theta, tau):
         return sdm.null_vectors(np.eye(M.shape[-1]) - nu[:, None, None] * M)
 
 
-def _relocate(char: FloquetCharacteristic, a: float, tau: float, theta: float | None = None):
-    """(depth, theta) of the zero of det(I - nu M(a (1 - nu))) nearest depth a, or None: from
-    `theta`, or the theta of RELOCATE_POINTS in [0, pi] where D is nearest singular (smallest
-    singular value over the next), Newton on det D in (depth, theta) (`log_char`: d ln det = dF / F, so
-    the step solves L_a da + L_theta dtheta = -1). For a converged point that is no simple zero
-    of det D: where the modes die out between cuts, M is so far from normal that its
-    eigenvalues are known to about 1e-3 only, and Newton on them can settle where D is regular
-    (seen: theta 0.768 where the zero at the same depth is at 1.805, and the chatter frequency of
-    a mode the simulation does not show)."""
-    if theta is None:
-        th = np.linspace(0.0, np.pi, RELOCATE_POINTS)
-        nu = np.exp(-1j * th)
-        with np.errstate(all="ignore"):
-            M = char.monodromy(a * (1.0 - nu), np.full(len(th), tau))
-            sv = np.linalg.svd(np.eye(M.shape[-1]) - nu[:, None, None] * M, compute_uv=False)
-            ratio = sv[:, -1] / sv[:, -2]
-        if not np.any(np.isfinite(ratio)):
-            return None
-        theta = th[int(np.nanargmin(ratio))]
-    x = np.array([a, theta])
-    for _ in range(RELOCATE_ITERATIONS):
-        with np.errstate(all="ignore"):
-            _, la, lt, _ = char.log_char(x[0], x[1], tau)
-            J = np.array([[la[0].real, lt[0].real], [la[0].imag, lt[0].imag]])
-            try:
-                step = np.linalg.solve(J, np.array([-1.0, 0.0]))
-            except np.linalg.LinAlgError:
-                return None
-        if not np.all(np.isfinite(step)):
-            return None
-        x = x + step / _step_excess(x[:1], step[:1], step[1:])[0]
-        if abs(step[0]) < 1e-10 * x[0] and abs(step[1]) < 1e-10:
-            break
-    if not (x[0] > 0 and floquet_vectors(char, x[:1], x[1:], np.array([tau]))[1][0]):
-        return None
-    return float(x[0]), float(x[1])
-
-
 def _genuine(char_at, p: CriticalPoint | None, tau: float, base: float, rel_tol: float, verify: bool, frequencies: bool) -> CriticalPoint | None:
-    """The point itself where det(I - nu M) has a simple zero there (`floquet_vectors`); else the
-    zero Newton on det D reaches from it (`_relocate`, depth and theta), counted at
-    VERIFY_FRACTION of its depth where the job is verified, its error the move of the same zero
-    one level down (not converged where none), its chatter frequency there; else the point
-    flagged not converged and not verified, without a chatter frequency. Seen where the modes
-    die out between cuts (158 e-folds): Newton on the eigenvalues of M, known there to about
-    1e-3 only, settled at 10.67 mm where det D is regular; the same table with its modes in
-    another order gave 11.37 mm, and an independent simulation grows from 11.36 mm."""
+    """The point itself where det(I - nu M) has a simple zero there (`floquet_vectors`), the count
+    did not show a branch below it and it has an error estimate. Else the point (where it is such
+    a zero) or the lowest simple zero that Newton on det D reaches from it (`_newton_on_determinant`) and, where
+    the job is verified, that the count at VERIFY_FRACTION of its depth shows to be the lowest;
+    where none is, the zero Newton on det D reaches from the top of the count's crossing below
+    (`_count_bracket`, to RELOCATE_BRACKET). Its error is the move of that zero one level down
+    (not converged where there is none), its chatter frequency taken there. Where no zero is
+    found: the point flagged not converged and not verified, without a chatter frequency.
+    Seen where the modes die out between cuts (110-160 e-folds): Newton on the eigenvalues of
+    M, known there to about 1e-3 only, settled at 10.67 mm where det D is regular, and the same
+    table with its modes in other orders gave 11.37 mm (an independent simulation grows from
+    11.36 mm), or, on another table, 1.57, 3.73 and 4.26 mm (the simulation: 1.671 mm)."""
     if p is None or not (np.isfinite(p.depth_m) and 0.0 < p.depth_m < np.inf):
         return p
     level = _level(p.substeps_per_rad, base)
     ch = char_at(level)
-    if floquet_vectors(ch, np.array([p.depth_m]), np.array([p.theta_rad]), np.array([tau]))[1][0]:
+    simple = bool(floquet_vectors(ch, np.array([p.depth_m]), np.array([p.theta_rad]), np.array([tau]))[1][0])
+    if simple and p.verified is not False and np.isfinite(p.rel_error_estimate):
         return p
-    moved = _relocate(ch, p.depth_m, tau)
-    if moved is None:
-        return dataclasses.replace(p, chatter_hz=np.nan, family=(), rel_error_estimate=np.inf, converged=False, verified=False if verify else p.verified)
-    a, theta = moved
-    verified = p.verified
-    if verify:
+
+    def zeros(depth):  # simple zeros of det D Newton reaches from this depth, by depth
+        a_r, t_r = _newton_on_determinant(ch, tau, depth, RELOCATE_POINTS, DESCENT_STARTS)
+        simple = floquet_vectors(ch, a_r, t_r, np.full(len(a_r), tau))[1] if len(a_r) else np.zeros(0, bool)
+        return list(zip(a_r[simple].tolist(), t_r[simple].tolist()))
+
+    def lowest(a, theta):  # the count at VERIFY_FRACTION x a shows no branch below
         count, resolved, rung, _, _ = _verify_count(ch, VERIFY_FRACTION * a, tau, [theta])
-        verified = bool(count == 0 and resolved and rung is None)
-    below = _relocate(char_at(level - 1), a, tau, theta) if level > 0 else None
-    err = abs(a - below[0]) / a if below is not None else np.inf
+        return bool(count == 0 and resolved and rung is None)
+
+    found = sorted(([(p.depth_m, p.theta_rad)] if simple else []) + zeros(p.depth_m))
+    if not verify:
+        pick = found[0] if found else None
+    else:
+        pick = next(((a, t) for a, t in found if lowest(a, t)), None)
+    if pick is None and verify:
+        def unstable(a):
+            count, resolved, _ = unstable_count(ch, a, tau)
+            return count > 0 or not resolved
+        top = max([p.depth_m] + [a for a, _ in found]) / VERIFY_FRACTION
+        if unstable(VERIFY_FRACTION * top):
+            _, hi = _count_bracket(unstable, 0.0, top, RELOCATE_BRACKET)
+            pick = next(((a, t) for a, t in zeros(hi) if abs(a - hi) <= 2.0 * RELOCATE_BRACKET * hi and lowest(a, t)), None)
+    if pick is None:
+        return p if simple else dataclasses.replace(p, chatter_hz=np.nan, family=(), rel_error_estimate=np.inf, converged=False, verified=False if verify else p.verified)
+    a, theta = pick
+    below = []
+    if level > 0:
+        a_d, t_d = _newton_on_determinant(char_at(level - 1), tau, a, RELOCATE_POINTS, DESCENT_STARTS)
+        below = [x for x, t in zip(a_d, t_d) if abs(t - _fold(theta)) <= 0.1]
+    err = min(abs(a - x) for x in below) / a if below else np.inf
     hz, family = floquet_families(ch, [a], [theta], [tau])[0] if frequencies else (np.nan, ())
     return dataclasses.replace(p, depth_m=a, theta_rad=_fold(theta), chatter_hz=hz, family=family, rel_error_estimate=err,
-                               converged=bool(err <= rel_tol and (verified is not False)), verified=verified)
+                               converged=bool(err <= rel_tol), verified=True if verify else p.verified)
 
 
 def floquet_families(char: FloquetCharacteristic, a, theta, tau, keep: float = 0.05) -> list:
@@ -2673,6 +2662,32 @@ def _descend(char, tau, a_top):
     return []
 
 
+def _count_bracket(unstable, lo: float, hi: float, rel: float):
+    """(lo, hi), rel apart, with the count's crossing between them, below VERIFY_FRACTION x hi
+    (`unstable(a)`: the count at a is not 0): probes at BISECT_PROBES of it first (a missed
+    branch is often just below), then bisection (geometric above a floor of hi / 1000, or the
+    `lo` given where higher)."""
+    floor = max(lo, hi * 1e-3)
+    hi *= VERIFY_FRACTION
+    lo = None
+    for fraction in BISECT_PROBES:
+        if unstable(fraction * hi):
+            hi = fraction * hi
+        else:
+            lo = fraction * hi
+            break
+    if lo is None:  # every probe unstable: down to the floor (the doubling's last stable depth only where still below)
+        floor = floor if floor < hi else 1e-3 * hi
+        lo = 0.0 if unstable(floor) else floor
+    while hi - lo > rel * hi:
+        mid = 0.5 * (lo + hi) if lo == 0.0 else np.sqrt(lo * hi)
+        if unstable(mid):
+            hi = mid
+        else:
+            lo = mid
+    return lo, hi
+
+
 def _bisect_repair(char, tau, a_top):
     trusted = True  # every count of the bisection resolved: its bracket can be trusted
 
@@ -2692,24 +2707,7 @@ def _bisect_repair(char, tau, a_top):
             lo, a = a, a * 2.0
         if hi is None:
             return []
-    floor = max(lo, hi * 1e-3)
-    hi *= VERIFY_FRACTION
-    lo = None
-    for fraction in BISECT_PROBES:  # a missed branch is often just below (a finer cut model's)
-        if unstable(fraction * hi):
-            hi = fraction * hi
-        else:
-            lo = fraction * hi
-            break
-    if lo is None:  # every probe unstable: down to the floor (the doubling's last stable depth only where still below)
-        floor = floor if floor < hi else 1e-3 * hi
-        lo = 0.0 if unstable(floor) else floor
-    while hi - lo > 0.01 * hi:
-        mid = 0.5 * (lo + hi) if lo == 0.0 else np.sqrt(lo * hi)
-        if unstable(mid):
-            hi = mid
-        else:
-            lo = mid
+    lo, hi = _count_bracket(unstable, lo, hi, 0.01)
     # the crossing lies between lo and hi (1 % apart): Newton from hi, the lowest point reached
     # not above hi by more than REPAIR_SLACK (a start that runs to a higher branch is no answer;
     # on a flip lobe, theta = pi, Newton's root at this level can sit just above the bracket the
