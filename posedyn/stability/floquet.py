@@ -1570,7 +1570,8 @@ def _genuine(char_at, p: CriticalPoint | None, tau: float, base: float, rel_tol:
     the job is verified, that the count at VERIFY_FRACTION of its depth shows to be the lowest;
     where none is, the zero Newton on det D reaches from the top of the count's crossing below
     (`_count_bracket`, to RELOCATE_BRACKET). Its error is the move of that zero one level down
-    (not converged where there is none), its chatter frequency taken there. Where no zero is
+    (not converged where there is none, or where the level leaves a soft mode unresolved:
+    `unresolved`), its chatter frequency taken there. Where no zero is
     found: the point flagged not converged and not verified, without a chatter frequency.
     Seen where the modes die out between cuts (110-160 e-folds): Newton on the eigenvalues of
     M, known there to about 1e-3 only, settled at 10.67 mm where det D is regular, and the same
@@ -1616,7 +1617,7 @@ def _genuine(char_at, p: CriticalPoint | None, tau: float, base: float, rel_tol:
     err = min(abs(a - x) for x in below) / a if below else np.inf
     hz, family = floquet_families(ch, [a], [theta], [tau])[0] if frequencies else (np.nan, ())
     return dataclasses.replace(p, depth_m=a, theta_rad=_fold(theta), chatter_hz=hz, family=family, rel_error_estimate=err,
-                               converged=bool(err <= rel_tol), verified=True if verify else p.verified)
+                               converged=bool(err <= rel_tol and not ch.unresolved(a, tau)), verified=True if verify else p.verified)
 
 
 def floquet_families(char: FloquetCharacteristic, a, theta, tau, keep: float = 0.05) -> list:
