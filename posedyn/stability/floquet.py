@@ -1565,14 +1565,15 @@ def floquet_vectors(char: FloquetCharacteristic, a, theta, tau):
 
 def _genuine(char_at, p: CriticalPoint | None, tau: float, base: float, rel_tol: float, verify: bool, frequencies: bool) -> CriticalPoint | None:
     """The point itself where det(I - nu M) has a simple zero there (`floquet_vectors`), the count
-    did not show a branch below it and it has an error estimate. Else the point (where it is such
-    a zero) or the lowest simple zero that Newton on det D reaches from it (`_newton_on_determinant`) and, where
-    the job is verified, that the count at VERIFY_FRACTION of its depth shows to be the lowest;
-    where none is, the zero Newton on det D reaches from the top of the count's crossing below
-    (`_count_bracket`, to RELOCATE_BRACKET). Its error is the move of that zero one level down
-    (not converged where there is none, or where the level leaves a soft mode unresolved:
-    `unresolved`), its chatter frequency taken there. Where no zero is
-    found: the point flagged not converged and not verified, without a chatter frequency.
+    did not show a branch below it and it has an error estimate. Else the lowest of the point
+    (where it is such a zero) and the simple zeros Newton on det D reaches from it
+    (`_newton_on_determinant`) that, where the job is verified, the count at VERIFY_FRACTION of
+    its depth shows to be the lowest; where none is, the zero Newton on det D reaches from the
+    top of the count's crossing below (`_count_bracket`, to RELOCATE_BRACKET). Its error is the
+    move of that zero one level down (not converged where there is none, or where the level
+    leaves a soft mode unresolved: `unresolved`), its chatter frequency taken there. Where no
+    zero is found: the point as it was where it is a simple zero, else flagged not converged
+    and not verified, without a chatter frequency.
     Seen where the modes die out between cuts (110-160 e-folds): Newton on the eigenvalues of
     M, known there to about 1e-3 only, settled at 10.67 mm where det D is regular, and the same
     table with its modes in other orders gave 11.37 mm (an independent simulation grows from
@@ -1587,8 +1588,8 @@ def _genuine(char_at, p: CriticalPoint | None, tau: float, base: float, rel_tol:
 
     def zeros(depth):  # simple zeros of det D Newton reaches from this depth, by depth
         a_r, t_r = _newton_on_determinant(ch, tau, depth, RELOCATE_POINTS, DESCENT_STARTS)
-        simple = floquet_vectors(ch, a_r, t_r, np.full(len(a_r), tau))[1] if len(a_r) else np.zeros(0, bool)
-        return list(zip(a_r[simple].tolist(), t_r[simple].tolist()))
+        ok = floquet_vectors(ch, a_r, t_r, np.full(len(a_r), tau))[1] if len(a_r) else np.zeros(0, bool)
+        return list(zip(a_r[ok].tolist(), t_r[ok].tolist()))
 
     def lowest(a, theta):  # the count at VERIFY_FRACTION x a shows no branch below
         count, resolved, rung, _, _ = _verify_count(ch, VERIFY_FRACTION * a, tau, [theta])
