@@ -14,9 +14,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from posedyn.dynamics import ToolTipDynamics
 from posedyn.stability import Cut, critical_points, floquet
-from posedyn.table import Mode
+from test_stability_multiscale import structure
 
 # (direction, fn_hz, zeta, k_n_per_m) as the blind check wrote them
 H008 = [
@@ -46,20 +45,12 @@ G025 = [
 ]
 
 
-def structure(rows):
-    return ToolTipDynamics.from_modes(x=[Mode(f, z, k) for d, f, z, k in rows if d == "x"], y=[Mode(f, z, k) for d, f, z, k in rows if d == "y"])
-
-
 def test_depth_does_not_depend_on_the_order_of_the_modes():
     """h008 (264.3 rpm, 2 teeth, a/D 0.0351, down): the blind check's boundary is 11.363 mm (its
     simulation decays at 0.95 x and grows at 1.05 x of 11.368). Before: 10.67 mm, 'converged',
     with the x modes first, 11.37 mm with the table's order."""
     cut = Cut(teeth=2, kt_pa=665.2e6, kn_pa=179.7e6, radial_immersion=0.0351, milling="down")
-    xs_first = structure(H008)
-    mixed = ToolTipDynamics.from_modes(
-        x=[Mode(f, z, k) for d, f, z, k in H008 if d == "x"][::-1], y=[Mode(f, z, k) for d, f, z, k in H008 if d == "y"][::-1]
-    )
-    a, b = critical_points([xs_first, mixed], cut, 264.3)
+    a, b = critical_points([structure(H008), structure(H008[::-1])], cut, 264.3)
     assert a.converged and b.converged
     assert a.depth_m == pytest.approx(b.depth_m, rel=5e-3)
     assert a.depth_m == pytest.approx(11.363e-3, rel=0.02)
