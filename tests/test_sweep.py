@@ -295,3 +295,15 @@ def test_a_grid_whose_twin_is_missing_is_named(tmp_path):
     with pytest.raises(InputError) as err:
         read_grid(grid)
     assert err.value.file == str(grid) and err.value.column == "meta.twin" and str(tmp_path / "nothere.toml") in err.value.expected
+
+
+def test_sweep_workers_run_without_the_profiler():
+    """Every sweep worker gets the plugin (`service.sweep.runner._dask`), which stops Dask's 10 ms
+    stack sampler, whose profiles nothing reads; fails where a worker still has it."""
+    from service.sweep.runner import _dask
+
+    def state(dask_worker):
+        return sorted(k for k in dask_worker.periodic_callbacks if k.startswith("profile"))
+
+    with _dask(1, None) as client:
+        assert list(client.run(state).values()) == [[]]
