@@ -8,42 +8,63 @@ Bad input anywhere ends in one line on stderr (`error: <file>, row <r> (line <l>
 
 from __future__ import annotations
 
+import importlib
 import sys
 from typing import Optional
 
 import typer
 
-from absorber.files import load_tuning_cache, save_tuning_cache
-from absorber.tuning import known_tunings
 from posedyn import __version__
 from posedyn.errors import InputError
-from service.cli import absorber, control, data, fit, gap, plan, posemodel, serve, sle, stability, sweep, tool, twin
 from service.heap import keep_freed_memory
 
-app = typer.Typer(
-    help="Pose-dependent tool-tip dynamics, chatter prediction and absorber/controller schedules for robotic milling.",
-    no_args_is_help=True,
-    pretty_exceptions_enable=False,
-    add_completion=False,
-)
-app.add_typer(data.app, name="data")
-app.add_typer(twin.app, name="twin")
-app.add_typer(absorber.app, name="absorber")
-app.add_typer(control.app, name="control")
-app.command("schedule")(absorber.schedule)
-app.command("fit")(fit.fit)
-app.command("train")(posemodel.train)
-app.command("predict")(posemodel.predict)
-app.command("chatter")(stability.chatter)
-app.command("lobes")(stability.lobes)
-app.command("sle")(sle.sle)
-app.command("sweep")(sweep.sweep)
-app.command("serve")(serve.serve)
-app.command("query")(serve.query)
-app.command("gap")(gap.gap)
-app.command("gap-campaign")(gap.gap_campaign)
-app.command("tool-change")(tool.tool_change)
-app.command("plan")(plan.plan)
+#: Every command: name -> (module of this package, function), and the groups: name -> module
+#: (its `app`). `main` imports only the module of the command it runs: all of them take 1.5 s
+#: (the absorber's optimizers, scikit-learn, scipy.stats), `posedyn chatter` needs 0.6 s of it.
+COMMANDS = {
+    "schedule": ("absorber", "schedule"),
+    "fit": ("fit", "fit"),
+    "train": ("posemodel", "train"),
+    "predict": ("posemodel", "predict"),
+    "chatter": ("stability", "chatter"),
+    "lobes": ("stability", "lobes"),
+    "sle": ("sle", "sle"),
+    "sweep": ("sweep", "sweep"),
+    "serve": ("serve", "serve"),
+    "query": ("serve", "query"),
+    "gap": ("gap", "gap"),
+    "gap-campaign": ("gap", "gap_campaign"),
+    "tool-change": ("tool", "tool_change"),
+    "plan": ("plan", "plan"),
+}
+GROUPS = {"data": "data", "twin": "twin", "absorber": "absorber", "control": "control"}
+
+
+def build_app(command: Optional[str] = None) -> typer.Typer:
+    """The Typer app with every command, or with `command` alone where it is one (the others'
+    modules are not imported; help, an unknown command and no command get them all). Commands
+    are registered in the order of GROUPS, then COMMANDS."""
+    app = typer.Typer(
+        help="Pose-dependent tool-tip dynamics, chatter prediction and absorber/controller schedules for robotic milling.",
+        no_args_is_help=True,
+        pretty_exceptions_enable=False,
+        add_completion=False,
+    )
+    app.callback()(_root)
+    only = command if command in GROUPS or command in COMMANDS else None
+    for name, module in GROUPS.items():
+        if only in (None, name):
+            app.add_typer(_module(module).app, name=name)
+    for name, (module, function) in COMMANDS.items():
+        if only in (None, name):
+            app.command(name)(getattr(_module(module), function))
+    return app
+
+
+def _module(name: str):
+    """A command module of this package by name (the CLI's dispatch table, not a lazy import of
+    a library: each command module imports its libraries at its top)."""
+    return importlib.import_module(f"service.cli.{name}")
 
 
 def _version(value: bool):
@@ -52,7 +73,6 @@ def _version(value: bool):
         raise typer.Exit()
 
 
-@app.callback()
 def _root(
     version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Print the version and exit."),
 ):
@@ -61,10 +81,17 @@ def _root(
 
 def main(argv: Optional[list[str]] = None) -> None:
     keep_freed_memory()  # the stability engine's temporaries reuse the heap (service.heap)
-    load_tuning_cache()  # absorber optima of earlier runs (seconds each to recompute)
-    known = len(known_tunings())
+    args = sys.argv[1:] if argv is None else list(argv)
+    app = build_app(args[0] if args else None)
+    # absorber optima of earlier runs (seconds each to recompute): only where the command can tune
+    # an absorber, i.e. its module brought in absorber.tuning (`posedyn chatter` does not)
+    tuning = sys.modules.get("absorber.tuning")
+    files = importlib.import_module("absorber.files") if tuning is not None else None
+    if files is not None:
+        files.load_tuning_cache()
+        known = len(tuning.known_tunings())
     try:
-        app(args=argv, prog_name="posedyn")
+        app(args=args, prog_name="posedyn")
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         sys.exit(2)
@@ -72,5 +99,5 @@ def main(argv: Optional[list[str]] = None) -> None:
         print(f"error: {exc.filename if exc.filename is not None else 'a file'}: {exc.strerror or exc}", file=sys.stderr)
         sys.exit(2)
     finally:
-        if len(known_tunings()) > known:
-            save_tuning_cache()
+        if files is not None and len(tuning.known_tunings()) > known:
+            files.save_tuning_cache()

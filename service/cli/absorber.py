@@ -24,7 +24,8 @@ from posedyn.io.atomic import write_text_atomic
 from posedyn.io.cut import read_cut
 from posedyn.io import read_pose_table
 from posedyn.stability import Cut, mean_force_matrix
-from service.cli.common import Milling, console, finite_or_none, flag_errors, modal_input_for, output_file, print_json, resolve_cut, twin_modes_at
+from service.cli.common import Milling, console, finite_or_none, flag_errors, output_file, print_json, resolve_cut
+from service.cli.inputs import modal_input_for, twin_modes_at
 
 app = typer.Typer(help="MRF absorber: optimal tuning, field for a target frequency.", no_args_is_help=True)
 

@@ -11,7 +11,8 @@ from rich.table import Table
 
 from absorber.active_damping import control_entries
 from absorber.files import read_actuator
-from service.cli.common import console, modal_table_for, print_json
+from service.cli.common import console, print_json
+from service.cli.inputs import modal_table_for
 
 app = typer.Typer(help="Active damping: DVF gain schedules and virtual absorbers.", no_args_is_help=True)
 

@@ -19,7 +19,8 @@ from posedyn.io.cut import read_cut
 from posedyn.io.modal_csv import read_tool_path
 from posedyn.errors import InputError
 from service.cli.absorber import Policy
-from service.cli.common import console, modal_table_for, output_folder, print_json, resolve_cut, twin_modes_at
+from service.cli.common import console, output_folder, print_json, resolve_cut
+from service.cli.inputs import modal_table_for, twin_modes_at
 
 COLUMNS = ("time_s", "pose_id", "target_hz", "voltage_v", "current_a", "field_mt", "fluid_field_mt", "temperature_c", "frequency_hz", "step_frequency_hz", "step_current_a")
 

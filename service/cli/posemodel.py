@@ -19,7 +19,8 @@ from posedyn.io.twin_file import load_twin
 from posedyn.posemodel import PoseModel, cross_validate
 from posedyn.posemodel import r2_score, suspect_measurements, table_targets
 from posedyn.posemodel.model import MODE_MATCH_FN, MODE_MATCH_K
-from service.cli.common import console, output_file, print_json, warn_outside_workspace
+from service.cli.common import console, output_file, print_json
+from service.cli.inputs import warn_outside_workspace
 
 
 class Method(str, Enum):

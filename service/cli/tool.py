@@ -15,7 +15,8 @@ from posedyn.dynamics import ToolTipDynamics
 from posedyn.io import write_modal_table
 from posedyn.io.tool_file import read_tool
 from posedyn.tool_change import tool_changed_table
-from service.cli.common import console, flag_errors, modal_table_for, output_file, print_json
+from service.cli.common import console, flag_errors, output_file, print_json
+from service.cli.inputs import modal_table_for
 
 
 def tool_change(
