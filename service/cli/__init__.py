@@ -20,7 +20,7 @@ from service.heap import keep_freed_memory
 
 #: Every command: name -> (module of this package, function), and the groups: name -> module
 #: (its `app`). `main` imports only the module of the command it runs: all of them take 1.5 s
-#: (the absorber's optimizers, scikit-learn, scipy.stats), `posedyn chatter` needs 0.6 s of it.
+#: (the absorber's optimizers, scikit-learn, scipy.stats), `posedyn chatter`'s 0.8 s.
 COMMANDS = {
     "schedule": ("absorber", "schedule"),
     "fit": ("fit", "fit"),
