@@ -1549,18 +1549,34 @@ def _winding(sample, th, max_points):
 #: is taken before Newton starts from its top.
 RELOCATE_POINTS = 128
 RELOCATE_BRACKET = 1e-3
+#: A null vector whose singular-value gap (smallest / next) is below NULL_SURE is taken as a
+#: zero of det D as it stands; one between NULL_SURE and sdm.NULL_GAP must also be a loss of
+#: stability: the count at (1 + CROSSING_STEP) x its depth not 0 (`_crossings_confirmed`). Seen
+#: (g025 with its y rows in 2 of 24 orders, modes dying out over 150 e-folds between cuts):
+#: gaps of 3e-4 and 1.2e-4 at 1.549 and 1.606 mm, reported converged, where the count is 0 up to
+#: 1.65 mm and the boundary is 1.67 mm; the genuine zeros there 1.2e-6. On the issue-17 pose's
+#: 300-speed lobes and a 100-pose chunk of the bench sweep (503 answers) the largest gap was
+#: 7.7e-6 and one was above 1e-6.
+NULL_SURE = 1e-6
+CROSSING_STEP = 1e-3
+#: Where no zero is confirmed and the count at the point's depth is 0, the boundary lies above:
+#: the count is read at UPWARD_RATIO times the depth, up to UPWARD_STEPS times, and the
+#: crossing bracketed from the last depth it was 0 (g025 in one of 24 row orders: a point at
+#: 1.107 mm where det D is regular, no zero Newton reaches from it; the boundary 1.670 mm).
+UPWARD_RATIO = 1.25
+UPWARD_STEPS = 12
 
 
-def floquet_vectors(char: FloquetCharacteristic, a, theta, tau):
+def floquet_vectors(char: FloquetCharacteristic, a, theta, tau, gap: float = sdm.NULL_GAP):
     """(z, ok) at boundary points (`sdm.null_vectors` of D = I - nu M(a (1 - nu)), nu =
     exp(-i theta)): z (B, 2n) the Floquet solution's state at the period start (M z = z / nu),
-    ok where D has a simple null vector. Not LAPACK's eigenvectors of M: a blind check's chatter
+    ok where D has a simple null vector (`gap`: `sdm.null_vectors`). Not LAPACK's eigenvectors of M: a blind check's chatter
     frequencies came out at 9085 Hz, beside a mode of k = 6.5e9 N/m, where the independent
     simulation chatters at 7089 Hz (geev's vector had a residual |M z - z / nu| of |z|)."""
     nu = np.exp(-1j * np.asarray(theta, dtype=float))
     with np.errstate(all="ignore"):
         M = char.monodromy(np.asarray(a, dtype=float) * (1.0 - nu), tau)
-        return sdm.null_vectors(np.eye(M.shape[-1]) - nu[:, None, None] * M)
+        return sdm.null_vectors(np.eye(M.shape[-1]) - nu[:, None, None] * M, gap)
 
 
 def _genuine(char_at, p: CriticalPoint | None, tau: float, base: float, rel_tol: float, verify: bool, frequencies: bool) -> CriticalPoint | None:
@@ -1569,7 +1585,9 @@ def _genuine(char_at, p: CriticalPoint | None, tau: float, base: float, rel_tol:
     (where it is such a zero) and the simple zeros Newton on det D reaches from it
     (`_newton_on_determinant`) that, where the job is verified, the count at VERIFY_FRACTION of
     its depth shows to be the lowest; where none is, the zero Newton on det D reaches from the
-    top of the count's crossing below (`_count_bracket`, to RELOCATE_BRACKET). Its error is the
+    top of the count's crossing below (`_count_bracket`, to RELOCATE_BRACKET), or above where the
+    count at the point is 0 (UPWARD_RATIO). A zero is a simple one where its null vector's gap
+    is decisive, else where the count just above it is not 0 (`_crossings_confirmed`). Its error is the
     move of that zero one level down (not converged where there is none, or where the level
     leaves a soft mode unresolved: `unresolved`), its chatter frequency taken there. Where no
     zero is found: the point as it was where it is a simple zero, else flagged not converged
@@ -1582,13 +1600,13 @@ def _genuine(char_at, p: CriticalPoint | None, tau: float, base: float, rel_tol:
         return p
     level = _level(p.substeps_per_rad, base)
     ch = char_at(level)
-    simple = bool(floquet_vectors(ch, np.array([p.depth_m]), np.array([p.theta_rad]), np.array([tau]))[1][0])
+    simple = bool(_crossings_confirmed(ch, np.array([p.depth_m]), np.array([p.theta_rad]), tau)[0])
     if simple and p.verified is not False and np.isfinite(p.rel_error_estimate):
         return p
 
     def zeros(depth):  # simple zeros of det D Newton reaches from this depth, by depth
         a_r, t_r = _newton_on_determinant(ch, tau, depth, RELOCATE_POINTS, DESCENT_STARTS)
-        ok = floquet_vectors(ch, a_r, t_r, np.full(len(a_r), tau))[1] if len(a_r) else np.zeros(0, bool)
+        ok = _crossings_confirmed(ch, a_r, t_r, tau) if len(a_r) else np.zeros(0, bool)
         return list(zip(a_r[ok].tolist(), t_r[ok].tolist()))
 
     def lowest(a, theta):  # the count at VERIFY_FRACTION x a shows no branch below
@@ -1605,8 +1623,13 @@ def _genuine(char_at, p: CriticalPoint | None, tau: float, base: float, rel_tol:
             count, resolved, _ = unstable_count(ch, a, tau)
             return count > 0 or not resolved
         top = max([p.depth_m] + [a for a, _ in found]) / VERIFY_FRACTION
+        lo = 0.0
+        for _ in range(UPWARD_STEPS):  # stable there: the boundary is above (the point was no zero)
+            if unstable(VERIFY_FRACTION * top):
+                break
+            lo, top = VERIFY_FRACTION * top, UPWARD_RATIO * top
         if unstable(VERIFY_FRACTION * top):
-            _, hi = _count_bracket(unstable, 0.0, top, RELOCATE_BRACKET)
+            _, hi = _count_bracket(unstable, lo, top, RELOCATE_BRACKET)
             pick = next(((a, t) for a, t in zeros(hi) if abs(a - hi) <= 2.0 * RELOCATE_BRACKET * hi and lowest(a, t)), None)
     if pick is None:
         return p if simple else dataclasses.replace(p, chatter_hz=np.nan, family=(), rel_error_estimate=np.inf, converged=False, verified=False if verify else p.verified)
@@ -1619,6 +1642,23 @@ def _genuine(char_at, p: CriticalPoint | None, tau: float, base: float, rel_tol:
     hz, family = floquet_families(ch, [a], [theta], [tau])[0] if frequencies else (np.nan, ())
     return dataclasses.replace(p, depth_m=a, theta_rad=_fold(theta), chatter_hz=hz, family=family, rel_error_estimate=err,
                                converged=bool(err <= rel_tol and not ch.unresolved(a, tau)), verified=True if verify else p.verified)
+
+
+def _crossings_confirmed(char: FloquetCharacteristic, a: np.ndarray, theta: np.ndarray, tau: float) -> np.ndarray:
+    """Whether each (a, theta) is a simple zero of det(I - nu M(a (1 - nu))): a null vector with
+    a singular-value gap below NULL_SURE, or below sdm.NULL_GAP and the winding count at
+    (1 + CROSSING_STEP) a not shown to be 0 (a boundary point brings multipliers out of the
+    circle just above it; where that count is 0 and resolved, the point is no crossing: an
+    eigenvalue of a graded M known to 1e-3 settled where D is merely near-singular)."""
+    a, theta = np.asarray(a, dtype=float), np.asarray(theta, dtype=float)
+    taus = np.full(len(a), tau)
+    _, loose = floquet_vectors(char, a, theta, taus)
+    _, sure = floquet_vectors(char, a, theta, taus, gap=NULL_SURE)
+    out = loose & sure
+    for k in np.flatnonzero(loose & ~sure):
+        count, resolved, _ = unstable_count(char, (1.0 + CROSSING_STEP) * a[k], tau, extra=[theta[k]])
+        out[k] = count > 0 or not resolved
+    return out
 
 
 def floquet_families(char: FloquetCharacteristic, a, theta, tau, keep: float = 0.05) -> list:

@@ -500,9 +500,9 @@ def _tile(steps: StepMatrices, count: int) -> StepMatrices:
 NULL_GAP = 1e-3
 
 
-def null_vectors(D: np.ndarray):
+def null_vectors(D: np.ndarray, gap: float = NULL_GAP):
     """(z, ok) of a stack D (B, N, N): z (B, N) the unit right singular vector of each one's
-    smallest singular value, ok where that value is below NULL_GAP x the next (a simple null
+    smallest singular value, ok where that value is below `gap` x the next (a simple null
     vector; a non-finite D gives ok False). The SVD, not LAPACK's eigenvectors of the monodromy:
     where the modes die out between cuts it is graded (singular values from 20 down to 1e-54)
     and geev's eigenvector for the critical multiplier had a residual of |z| (its balancing)."""
@@ -510,7 +510,7 @@ def null_vectors(D: np.ndarray):
     bad = ~np.all(np.isfinite(D), axis=(1, 2))
     D[bad] = np.eye(D.shape[-1])
     _, sv, vh = np.linalg.svd(D)
-    return np.conj(vh[:, -1, :]), (sv[:, -1] <= NULL_GAP * sv[:, -2]) & ~bad
+    return np.conj(vh[:, -1, :]), (sv[:, -1] <= gap * sv[:, -2]) & ~bad
 
 
 def floquet_positions(steps: StepMatrices, mu: np.ndarray) -> np.ndarray:
