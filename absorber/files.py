@@ -21,7 +21,7 @@ from absorber.robust import HostUncertainty
 from absorber.tuning import Host, known_tunings, remember_tunings
 from posedyn.errors import InputError, check_non_negative, check_positive
 from posedyn.io.atomic import write_text_atomic
-from posedyn.io.params import named_as, read_params, reading
+from posedyn.io.params import check_numbers, named_as, read_params, reading
 from posedyn.stability.cutting import Cut
 
 
@@ -42,7 +42,8 @@ def read_absorber(path: str | os.PathLike | None) -> MRFAbsorber:
     """The `[absorber]`, `[mrf]`, `[field]` tables of an absorber parameter file."""
     if path is None:
         return MRFAbsorber()
-    p = read_params(path)
+    p = read_params(path, kind="mrf_absorber")
+    check_numbers(p, path, text=("mrf.model",))
     for table, allowed in ABSORBER_KEYS.items():
         for key in p.get(table, {}):
             if key not in allowed:
@@ -66,7 +67,8 @@ def read_drive(path: str | os.PathLike | None) -> CoilDrive:
     `modulus_tempco_per_k`, `modulus_reference_c` as `posedyn gap` measures them)."""
     if path is None:
         return CoilDrive()
-    p = read_params(path)
+    p = read_params(path, kind="mrf_absorber")
+    check_numbers(p, path, text=("mrf.model",))
     table = p.get("drive", {})
     known = {f.name for f in fields(CoilDrive)}
     for key in table:
@@ -80,7 +82,8 @@ def read_actuator(path: str | os.PathLike | None) -> ControlConfig:
     """The actuator and control settings of an active-damping file."""
     if path is None:
         return ControlConfig()
-    p = read_params(path)
+    p = read_params(path, kind="active_damping")
+    check_numbers(p, path, text=("control.mount_axis", "control.virtual_layout"))
     with reading(path, "actuator file"):
         a = p["actuator"]
         check_non_negative("actuator.horizontal.delay_ms", a["horizontal"]["delay_ms"])
@@ -117,7 +120,8 @@ def read_host(path: str | os.PathLike) -> HostCase:
     """The `[host]` mode, its `[uncertainty]` (relative standard deviations; seed 002 Table 3's
     when absent), the `[cut]` (with its optional feed_per_tooth_mm), `[absorber] mass_ratio` and
     `[actuator] force_limit_n` of a host file."""
-    p = read_params(path)
+    p = read_params(path, kind="host_and_cut")
+    check_numbers(p, path, text=("cut.milling",))
     with reading(path, "host file"):
         h, c, u = p["host"], p["cut"], p.get("uncertainty", {})
         host = Host(fn_hz=float(h["fn_hz"]), k_n_per_m=float(h["k_n_per_m"]), zeta=float(h["zeta"]))

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import os
 
-from posedyn.io.params import check_keys, named_as, read_params, reading, whole_number
+from posedyn.io.params import check_keys, check_numbers, named_as, number, read_params, reading, whole_number
 from posedyn.sle import SleCut
 from posedyn.stability import Cut
 from posedyn.stability.cutting import check_rpm
@@ -26,8 +26,9 @@ CUT_KEYS = {
 
 
 def _read(path: str | os.PathLike) -> dict:
-    p = read_params(path)
+    p = read_params(path, kind="cut")
     check_keys(p, CUT_KEYS, path, "cut file")
+    check_numbers(p, path, text=("cut.milling",))
     return p
 
 
@@ -39,13 +40,13 @@ def read_cut(path: str | os.PathLike) -> tuple[Cut, float, int | None]:
         with named_as(FILE_KEYS):
             cut = Cut(
                 teeth=whole_number(c["teeth"], "cut.teeth"),
-                kt_pa=float(c["kt_mpa"]) * 1e6,
-                kn_pa=float(c["kn_mpa"]) * 1e6,
-                radial_immersion=float(c["radial_immersion"]),
+                kt_pa=number(c["kt_mpa"], "cut.kt_mpa") * 1e6,
+                kn_pa=number(c["kn_mpa"], "cut.kn_mpa") * 1e6,
+                radial_immersion=number(c["radial_immersion"], "cut.radial_immersion"),
                 milling=c.get("milling", "down"),
-                feed_angle_deg=float(c.get("feed_angle_deg", 0.0)),
+                feed_angle_deg=number(c.get("feed_angle_deg", 0.0), "cut.feed_angle_deg"),
             )
-        rpm = check_rpm(float(c["rpm"]), "cut.rpm")
+        rpm = check_rpm(number(c["rpm"], "cut.rpm"), "cut.rpm")
         steps = p.get("stability", {}).get("steps")
         steps = None if steps is None else whole_number(steps, "stability.steps")
     return cut, rpm, steps
@@ -63,16 +64,16 @@ def read_sle_cut(path: str | os.PathLike) -> tuple[SleCut, float] | None:
         return None
     with reading(path, "cut file"):
         c, s = p["cut"], p["sle"]
-        diameter = float(c["tool_diameter_mm"]) * 1e-3
-        offset_m = float(s.get("offset_um", 0.0)) * 1e-6
+        diameter = number(c["tool_diameter_mm"], "cut.tool_diameter_mm") * 1e-3
+        offset_m = number(s.get("offset_um", 0.0), "sle.offset_um") * 1e-6
         return SleCut(
             teeth=whole_number(c["teeth"], "cut.teeth"),
-            kt_pa=float(c["kt_mpa"]) * 1e6,
-            kn_pa=float(c["kn_mpa"]) * 1e6,
+            kt_pa=number(c["kt_mpa"], "cut.kt_mpa") * 1e6,
+            kn_pa=number(c["kn_mpa"], "cut.kn_mpa") * 1e6,
             tool_diameter_m=diameter,
-            helix_rad=math.radians(float(s["helix_deg"])),
-            radial_depth_m=float(c["radial_immersion"]) * diameter,
-            axial_depth_m=float(s["axial_depth_mm"]) * 1e-3,
-            feed_per_tooth_m=float(s["feed_per_tooth_mm"]) * 1e-3,
+            helix_rad=math.radians(number(s["helix_deg"], "sle.helix_deg")),
+            radial_depth_m=number(c["radial_immersion"], "cut.radial_immersion") * diameter,
+            axial_depth_m=number(s["axial_depth_mm"], "sle.axial_depth_mm") * 1e-3,
+            feed_per_tooth_m=number(s["feed_per_tooth_mm"], "sle.feed_per_tooth_mm") * 1e-3,
             milling=c.get("milling", "down"),
         ), offset_m

@@ -51,7 +51,7 @@ class Grid:
 
 def read_grid(path: str | os.PathLike) -> Grid:
     path = Path(path)
-    p = read_params(path)
+    p = read_params(path, kind="pose_grid")
     where = dict(file=str(path))
     poses: list[GridPose] = []
     with reading(path, "grid file"):

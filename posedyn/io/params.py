@@ -3,6 +3,7 @@ named tables of values. Physics code gets plain dicts or dataclasses built from 
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import tomllib
@@ -13,8 +14,10 @@ from posedyn.errors import InputError
 from posedyn.io.atomic import write_text_atomic
 
 
-def read_params(path: str | os.PathLike) -> dict:
-    """Load a parameter TOML file; the error names the file and the line of a syntax error."""
+def read_params(path: str | os.PathLike, kind: str | tuple[str, ...] | None = None) -> dict:
+    """Load a parameter TOML file; the error names the file and the line of a syntax error.
+    `kind`: the `meta.kind` (or kinds) the caller reads (another kind is refused: a pose grid
+    given as a cut file would otherwise be read for its defaults)."""
     path = Path(path)
     try:
         text = path.read_bytes().decode("utf-8")
@@ -33,6 +36,9 @@ def read_params(path: str | os.PathLike) -> dict:
     for key in ("kind", "source"):
         if not isinstance(meta.get(key), str) or not meta[key]:
             raise InputError("a non-empty string", got=meta.get(key), file=str(path), column=f"meta.{key}")
+    kinds = (kind,) if isinstance(kind, str) else kind
+    if kinds is not None and meta["kind"] not in kinds:
+        raise InputError(" or ".join(f'kind = "{k}"' for k in kinds), got=meta["kind"], file=str(path), column="meta.kind")
     return params
 
 
@@ -49,6 +55,39 @@ def check_keys(params: dict, allowed: dict[str, tuple[str, ...]], path: str | os
         for key in values:
             if key not in allowed[table]:
                 raise InputError(f"one of the keys {', '.join(allowed[table])} in [{table}]", got=key, file=str(Path(path)), column=f"{table}.{key}")
+
+
+def number(value, name: str) -> float:
+    """A finite real given as a TOML integer or float, else InputError naming the key (a TOML
+    boolean or a quoted number is refused: float(true) would silently be 1)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise InputError(f"a number for {name}", got=value, column=name)
+    return float(value)
+
+
+def check_numbers(params: dict, path: str | os.PathLike, text: tuple[str, ...] = ()) -> None:
+    """Every value of the file outside [meta] a number (or a list of numbers, a table of them),
+    but the keys named in `text` ("table.key", "table.key" of each [[table]] item): a TOML boolean
+    or a quoted number is refused with its key and the file (float(true) would silently be 1)."""
+    def walk(value, name, key):
+        if isinstance(value, dict):
+            for k, v in value.items():
+                walk(v, f"{name}.{k}", f"{key}.{k}")
+        elif isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+            for i, item in enumerate(value, 1):
+                walk(item, f"{name}[{i}]", key)
+        elif isinstance(value, list):
+            for i, v in enumerate(value):
+                walk(v, f"{name}[{i}]", key)
+        elif key not in text:
+            try:
+                number(value, name)
+            except InputError as exc:
+                raise exc.located(file=str(Path(path))) from None
+
+    for table, values in params.items():
+        if table != "meta":
+            walk(values, table, table)
 
 
 def whole_number(value, name: str) -> int:

@@ -9,13 +9,14 @@ from __future__ import annotations
 
 import os
 
-from posedyn.io.params import read_params, reading
+from posedyn.io.params import check_numbers, read_params, reading
 from posedyn.rcsa import Connection
 from posedyn.tool import Section, Tool
 
 
 def read_tool(path: str | os.PathLike) -> tuple[Tool, Connection]:
-    p = read_params(path)
+    p = read_params(path, kind="tool")
+    check_numbers(p, path, text=("tool.name",))
     with reading(path, "tool file"):
         t, c = p["tool"], p["connection"]
         sections = tuple(Section(float(length) * 1e-3, float(diameter) * 1e-3) for length, diameter in t["sections"])

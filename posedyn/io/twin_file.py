@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from posedyn.io.atomic import write_text_atomic
-from posedyn.io.params import read_params, reading, toml_value
+from posedyn.io.params import check_numbers, read_params, reading, toml_value
 from posedyn.io.shipped import SHIPPED_TWIN
 from posedyn.robot import Robot, TwinParameters
 from posedyn.table import Mode
@@ -27,7 +27,8 @@ class TwinSpec:
 
 def read_twin(path: str | os.PathLike) -> TwinSpec:
     path = Path(path)
-    p = read_params(path)
+    p = read_params(path, kind="robot_twin")
+    check_numbers(p, path, text=("robot.urdf", "spindle_modes.direction"))
     with reading(path, "twin file"):
         robot = p["robot"]
         urdf = (path.parent / robot["urdf"]).resolve()
