@@ -387,15 +387,16 @@ def read_tool_path(path: str | os.PathLike) -> tuple[PoseSet, np.ndarray]:
         raise InputError("a time_s column (s) beside the pose columns", got=header[:8], file=str(path), line=1, column="time_s")
     j = header.index("time_s")
     times = []
-    for r, cells in enumerate(rows[1:], 1):
-        if not any(c.strip() for c in cells):
+    for line, cells in enumerate(rows[1:], 2):
+        if not any(c.strip() for c in cells):  # blank lines are no rows (as in the other tables)
             continue
+        r = len(times) + 1
         try:
             value = float(cells[j])
         except (ValueError, IndexError):
-            raise InputError("a number of seconds", got=cells[j] if j < len(cells) else "nothing", file=str(path), row=r, line=r + 1, column="time_s") from None
+            raise InputError("a number of seconds", got=cells[j] if j < len(cells) else "nothing", file=str(path), row=r, line=line, column="time_s") from None
         if not np.isfinite(value) or (times and value <= times[-1]):
-            raise InputError("finite times increasing from row to row", got=value, file=str(path), row=r, line=r + 1, column="time_s")
+            raise InputError("finite times increasing from row to row", got=value, file=str(path), row=r, line=line, column="time_s")
         times.append(value)
     rest = "\n".join(",".join(_quote(c) for k, c in enumerate(cells) if k != j) for cells in rows if any(c.strip() for c in cells)) + "\n"
     return parse_pose_table(rest, str(path)), np.array(times)
@@ -419,6 +420,8 @@ def parse_pose_table(text: str, source: str) -> PoseSet:
     first_row: dict[str, int] = {}
     for line_number, cells in enumerate(reader, 2):
         if any(c.strip() for c in cells):
+            if len(cells) != len(header):  # here: the placeholder mode's five fields would be counted too
+                raise InputError(f"{len(header)} fields like the header", got=len(cells), file=source, row=len(lines), line=line_number)
             pose_id = cells[header.index("pose_id")].strip() if "pose_id" in header and len(cells) > header.index("pose_id") else None
             if pose_id in first_row:  # (the placeholder mode below would name it 'P5/x/1')
                 raise InputError(f"one row per pose_id (already in row {first_row[pose_id]})", got=pose_id, file=source, row=len(lines), line=line_number, column="pose_id")
