@@ -215,6 +215,12 @@ def test_query_reads_its_request_before_connecting_and_an_unreachable_service_is
         assert bad.returncode == 2 and bad.stderr.startswith(f"error: option '{option}': expected a JSON object"), bad.stderr
     bad = run_cli("query", "--cell", "c", "--connect", nowhere, "--pose-json", json.dumps(P5), "--cut-json", '{"rpm": Infinity}', "--timeout-s", "2")
     assert bad.returncode == 2 and "Infinity is not a JSON number" in bad.stderr
+    # valid JSON the service would refuse (it was sent, and its refusal or no_session was exit 3)
+    for option, text, said in (("--pose-json", json.dumps({**P5, "x_mm": "a"}), "pose.x_mm: expected a number"),
+                               ("--cut-json", '{"teeth": 0}', "cut.teeth: expected an integer")):
+        args = ["--pose-json", json.dumps(P5), option, text] if option == "--cut-json" else [option, text]
+        bad = run_cli("query", "--cell", "c", "--connect", nowhere, *args, "--timeout-s", "2")
+        assert bad.returncode == 2 and bad.stderr.startswith(f"error: option '{option}'") and said in bad.stderr, bad.stderr
     # flags judged before connecting (a wildcard cell, Zenoh's debug text for a bad endpoint, a plan id the service refuses after a 6 s wait)
     for flags, flag in ((["--cell", "c/**", "--connect", nowhere], "--cell"), (["--cell", "c", "--connect", "garbage"], "--connect"),
                         (["--cell", "c", "--connect", nowhere, "--timeout-s", "-1"], "--timeout-s")):

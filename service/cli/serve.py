@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import logging
+import re
 import signal
 import sys
 import threading
@@ -18,7 +19,7 @@ from posedyn.io import read_pose_table
 from posedyn.io.modal_csv import read_tool_path
 from service.cli.common import console, resolve_cut
 from service.zenoh_service.client import ScheduleClient, ServiceError
-from service.zenoh_service.protocol import CELL_RULE, PLAN_ID_RULE, RequestError, valid_cell, valid_plan_id
+from service.zenoh_service.protocol import CELL_RULE, PLAN_ID_RULE, RequestError, parse_cut, parse_pose, valid_cell, valid_plan_id
 from service.zenoh_service.server import ScheduleService, ServiceSettings
 from service.zenoh_service.session import DEFAULT_LISTEN, zenoh_config
 from service.zenoh_service.signing import read_key
@@ -123,8 +124,11 @@ def query(
     cut = _json_option(cut_json, "--cut-json") if cut_json else None
     key = read_key(signing_key) if signing_key else None
     pose = rows = times = None  # the request read before connecting: a bad one is exit 2 without a wait
+    if cut is not None:
+        _checked(parse_cut, cut, "--cut-json")
     if pose_json is not None:
         pose = _json_option(pose_json, "--pose-json")
+        _checked(parse_pose, pose, "--pose-json")
     else:
         lines = plan.read_text(encoding="utf-8", errors="replace").splitlines()
         if not lines:
@@ -138,6 +142,7 @@ def query(
         client = ScheduleClient(cell, connect=connect, config=config, timeout_s=timeout_s, service_id=service_id, signing_key=key).open()
     except Exception as exc:  # noqa: BLE001 - zenoh could not open (no route, TLS refused): no service answered, as a missing reply
         reason = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
+        reason = re.sub(r"\s+at \S+\.rs:\d+\.?$", "", reason)  # zenoh's own source location means nothing to a user
         print(f"error: no_session: could not reach {', '.join(connect) or 'a Zenoh peer'}: {reason}", file=sys.stderr)
         raise typer.Exit(3)
     try:
@@ -175,6 +180,15 @@ def query(
 
 def _g(value) -> str:
     return "-" if value is None else f"{value:.4g}"
+
+
+def _checked(parse, value, flag: str) -> None:
+    """The service's own check of a request part (`protocol.parse_pose`, `parse_cut`), before
+    connecting: what it would refuse is exit 2 here, named by the flag."""
+    try:
+        parse(value)
+    except RequestError as exc:
+        raise InputError("a request the service accepts", got=f"{exc.code}: {exc.message}", column=flag) from None
 
 
 def _check_query_flags(cell: str, connect: list[str], plan_id: Optional[str], timeout_s: float) -> None:
