@@ -231,3 +231,12 @@ def test_chatter_imports_only_what_it_needs():
     out = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, cwd=ROOT, check=True).stdout
     assert out.strip().splitlines()[-1] == "[]"
     assert json.loads(out[: out.rindex("\n[")])["critical_depth_mm"] > 0
+
+
+@pytest.mark.parametrize("args", [("-h",), ("chatter", "-h"), ("twin", "-h"), ("twin", "modes", "-h")])
+def test_short_help_flag_is_help_everywhere(args):
+    """-h was 'No such option' (only --help was one)."""
+    from tests.cli_helpers import cli_in_process
+
+    code, out, err = cli_in_process(*args)
+    assert code == 0 and "Usage: posedyn" in out, (code, err)

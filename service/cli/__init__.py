@@ -49,6 +49,7 @@ def build_app(command: Optional[str] = None) -> typer.Typer:
         no_args_is_help=True,
         pretty_exceptions_enable=False,
         add_completion=False,
+        context_settings={"help_option_names": ["-h", "--help"]},  # every command's context inherits it
     )
     app.callback()(_root)
     only = command if command in GROUPS or command in COMMANDS else None
