@@ -103,7 +103,8 @@ def test_flags_and_file_keys_are_named_as_the_user_wrote_them(tmp_path, datasets
     assert result.returncode == 2 and result.stderr.startswith("error: option '--noise-fn-pct'")
     result = posedyn("twin", "modes", "--x-mm", "nan", "--y-mm", 0, "--z-mm", 600, "--beta-deg", 0)
     assert result.returncode == 2 and result.stderr.startswith("error: option '--x-mm': expected a finite number")
-    assert "[host], [cut]" in posedyn("absorber", "robust", "--help").stdout  # (rich markup ate them)
+    robust_help = posedyn("absorber", "robust", "--help").stdout
+    assert "[host]," in robust_help and "[cut]" in robust_help  # (rich markup ate them; the help may wrap between the two)
 
     actuator = tmp_path / "slow_actuator.toml"
     actuator.write_text((datasets / "seeds/sahu2024_active_damping.toml").read_text().replace("delay_ms = 0.6", "delay_ms = 600"))

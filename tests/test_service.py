@@ -244,7 +244,7 @@ def test_query_cli_reports_errors_and_zero_replies(service, tmp_path):
     assert ok.returncode == 0, ok.stderr
     assert json.loads(ok.stdout)["pose_id"] == "P5"
     bad = subprocess.run(base + ["--pose-json", '{"x_mm": 1}'], capture_output=True, text=True, cwd=ROOT, timeout=120)
-    assert bad.returncode == 3 and "missing_field" in bad.stderr
+    assert bad.returncode == 2 and "missing_field" in bad.stderr  # the service's own check, before connecting
     nobody = subprocess.run(
         [sys.executable, "-c", "from service.cli import main; main()", "query", "--cell", "nobody", "--connect", service[1], "--timeout-s", "2", "--pose-json", json.dumps(P5)],
         capture_output=True, text=True, cwd=ROOT, timeout=120,

@@ -61,7 +61,7 @@ def number(value, name: str) -> float:
     """A finite real given as a TOML integer or float, else InputError naming the key (a TOML
     boolean or a quoted number is refused: float(true) would silently be 1)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise InputError(f"a number for {name}", got=value, column=name)
+        raise InputError(f"a finite number for {name}", got=value, column=name)
     return float(value)
 
 
