@@ -109,3 +109,38 @@ def test_a_higher_zero_is_not_the_answer_in_any_order(order):
     assert r.converged
     assert 1.6664e-3 * 0.99 <= r.depth_m <= 1.6764e-3 * 1.01
     assert r.chatter_hz == pytest.approx(5359.5, abs=10.7)
+
+
+# A blind row-order check (random graded tables, each in 5 orders, through `posedyn chatter`):
+# o37 (211.95 rpm, 2 teeth, a/D 0.0765, down, Kt 850.3, Kn 181.5 MPa) in its table's order
+O37_X = [("x", 6.521, 0.0315, 3435000.0), ("x", 5267.62, 0.0116, 58030000.0), ("x", 9669.6, 0.0106, 16930000.0), ("x", 9672.83, 0.0288, 10670000.0)]
+O37_Y = [("y", 3.206, 0.0439, 41510000.0), ("y", 8.031, 0.0411, 7924000.0), ("y", 20.046, 0.0288, 2320000.0), ("y", 5464.26, 0.0157, 1146000000.0),
+         ("y", 9120.05, 0.0123, 18080000.0)]
+O37_CUT = Cut(teeth=2, kt_pa=850.3e6, kn_pa=181.5e6, radial_immersion=0.0765, milling="down")
+
+
+def test_newton_does_not_stop_where_its_secant_derivative_jumped():
+    """From the coarse models' boundary point (0.9936 mm, theta 2.7921) Newton on the finest
+    model (685 sub-steps a radian, where that point is no zero: the count is 0 from 0.95 to
+    1.066 mm) jumped to another eigenvalue (|g| = 87, then 101): the secant G_c made every step
+    tiny and it stopped there, 'converged' (floquet.LAST_G)."""
+    tau = 60.0 / (211.95 * 2)
+    base = floquet.coarsest_substeps(O37_CUT)
+    fine = floquet.FloquetCharacteristic(structure(O37_X + O37_Y), O37_CUT, base * 2.0**6)
+    a, theta, ok, _, _ = floquet._newton(fine, np.array([0.9936041595834282e-3]), np.array([2.7921]), np.array([tau]), tol=floquet.REFINE_TOL)
+    if ok[0]:  # where it converges, on a zero
+        g, _ = floquet._critical_log(fine, a, theta, np.array([tau]))
+        assert np.abs(g[0]) < floquet.LAST_G
+
+
+def test_levels_that_agree_on_an_aliased_mode_are_not_converged():
+    """o37: the engine gave 0.9936 mm 'converged' (two coarse models, 43 and 86 sub-steps a radian,
+    10 and 5 periods of the 9.4-9.7 kHz modes a sub-step, agreed to 5e-4) and 1.0706 mm with the
+    modes in descending order. The independent simulation (tests/independent_milling_sim.py,
+    6 and 12 s records) decays at 1.03 mm and grows at 1.11 mm; its default 3 s record grows from
+    0.75 mm (the robot modes' transient). The look-ahead across several levels is now Newton to
+    the root there, not one step from the coarse point."""
+    r = critical_points([structure(O37_X + O37_Y)], O37_CUT, 211.95)[0]
+    assert r.converged
+    assert 1.03e-3 <= r.depth_m <= 1.11e-3
+    assert r.chatter_hz == pytest.approx(9406.7, abs=2 * 7.07)
