@@ -203,3 +203,21 @@ def test_sle_options_out_of_range_are_refused_by_their_flags(tmp_path):
         assert result.returncode == 2 and flag in result.stderr + result.stdout and "Traceback" not in result.stderr, (extra, result.stderr)
     assert "got -30.0" in run_cli(*base, "--rpm", 3000, "--helix-deg", -30).stderr  # (not -29.999999999999996)
     assert run_cli(*base, "--rpm", 3000, "--helix-deg", 45).returncode == 0
+
+
+def test_sle_checks_its_action_and_speeds_before_reading_anything(tmp_path):
+    """A misspelt action was reported only once every option was given and the tables were read
+    (a user typing `posedyn sle compenstae` was asked for --modes first); a bad speed range after
+    the tables were read. Both are now refused first, named by their argument."""
+    missing = tmp_path / "absent.csv"  # never read: the checks come first
+    result = run_cli("sle", "compenstae")
+    assert result.returncode == 2 and "ACTION" in result.stderr and "compenstae" in result.stderr, result.stderr
+    base = ("sle", "--modes", missing, "--kt-mpa", 796, "--kn-mpa", 169, "--teeth", 3, "--tool-diameter-mm", 10, "--axial-depth-mm", 2,
+            "--feed-per-tooth-mm", 0.05, "--radial-depth-mm", 3)
+    for extra in (("--rpm-min", 3000, "--rpm-max", 1000), ("--rpm-min", 1000), ()):
+        result = run_cli(*base, *extra)
+        assert result.returncode == 2 and "--rpm" in result.stderr and "absent.csv" not in result.stderr, (extra, result.stderr)
+    result = run_cli("sle", "compensate", *base[1:])
+    assert result.returncode == 2 and "--rpm for compensate" in result.stderr and "absent.csv" not in result.stderr, result.stderr
+    result = run_cli(*base, "--rpm", 3000)  # a good command line: now the file is read, and named
+    assert result.returncode == 2 and "absent.csv" in result.stderr, result.stderr

@@ -76,6 +76,8 @@ def sle(
     as_json: bool = typer.Option(False, "--json"),
 ):
     """SLE at one speed (--rpm) or over a range (--rpm-min --rpm-max --rpm-steps); `posedyn sle compensate ...` iterates the radial depth."""
+    if action not in (None, "compensate"):
+        raise InputError("no action or 'compensate'", got=action, column="ACTION")
     args = dict(modes=modes, teeth=teeth, kt_mpa=kt_mpa, kn_mpa=kn_mpa, tool_diameter_mm=tool_diameter_mm, radial_depth_mm=radial_depth_mm, axial_depth_mm=axial_depth_mm, feed_per_tooth_mm=feed_per_tooth_mm)
     missing = [k for k, v in args.items() if v is None]
     if missing:
@@ -84,14 +86,14 @@ def sle(
         raise InputError("x or y", got=direction, column="--direction")
     if rpm is not None and (rpm_min is not None or rpm_max is not None):
         raise InputError("--rpm (one speed) or --rpm-min and --rpm-max (a range), not both", got="both", column="--rpm")
+    if action == "compensate" and rpm is None:
+        raise InputError("--rpm for compensate", got="missing", column="--rpm")
+    if action is None and rpm is None and (rpm_min is None or rpm_max is None or not 0 < rpm_min < rpm_max or rpm_steps < 2):
+        raise InputError("--rpm, or 0 < --rpm-min < --rpm-max with --rpm-steps >= 2", column="--rpm")
     dyn, cut = _inputs(modes, extra, pose_id, teeth, kt_mpa, kn_mpa, tool_diameter_mm, helix_deg, radial_depth_mm, axial_depth_mm, feed_per_tooth_mm, milling, direction)
 
     offset = offset_um * 1e-6
-    if action not in (None, "compensate"):
-        raise InputError("no action or 'compensate'", got=action, column="ACTION")
     if action == "compensate":
-        if rpm is None:
-            raise InputError("--rpm for compensate", got="missing", column="--rpm")
         with flag_errors(SLE_FLAGS):
             history = compensate(dyn, cut, rpm, tolerance_um * 1e-6, slices=slices, offset_m=offset)
         out = {"iterations": [{"radial_depth_mm": a * 1e3, "sle_um": e * 1e6, "part_error_um": p * 1e6} for a, e, p in history]}
@@ -117,8 +119,6 @@ def sle(
         elif not out["stable"]:
             console.print(f"  the cut CHATTERS: axial depth {cut.axial_depth_m * 1e3:g} mm is above the critical depth {critical * 1e3:.4g} mm; the SLE of a stable cut does not apply")
         return
-    if rpm_min is None or rpm_max is None or not 0 < rpm_min < rpm_max or rpm_steps < 2:
-        raise InputError("--rpm, or 0 < --rpm-min < --rpm-max with --rpm-steps >= 2", column="--rpm")
     speeds = np.linspace(rpm_min, rpm_max, rpm_steps)
     with flag_errors(SLE_FLAGS):
         values = sle_m(dyn, cut, speeds, slices, offset_m=offset)
