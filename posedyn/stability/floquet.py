@@ -2333,6 +2333,7 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
         level += 1
     err = np.full(len(ej), np.inf)
     conv_job = np.zeros(J, bool)
+    tied = np.zeros(J, bool)  # settled but for which of near points is the lowest (`settle`)
     level_job = np.zeros(J, int)
     lost = np.zeros(J, bool)  # no point of the job followed to level_job + 1
     active = np.ones(len(ej), bool)
@@ -2403,7 +2404,7 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
                 moved[far] = np.where(okf, np.maximum(moved[far], np.abs(af - ea[sel[far]]) / af), np.inf)
             err[sel] = np.maximum(err[sel], moved)
         for j in done:
-            conv_job[j] = False
+            conv_job[j] = tied[j] = False
             active[ej == j] = True
             settle(j, level)
 
@@ -2414,8 +2415,10 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
         other = mine[(np.abs(et[mine] - et[b]) > 1e-3) | (np.abs(ea[mine] - ea[b]) > 1e-5 * ea[b])]  # other boundary points (not b again)
         with np.errstate(invalid="ignore"):
             ranked = (ea[other] * (1.0 - err[other]) > ea[b] * (1.0 + err[b])) | (np.maximum(err[other], err[b]) <= TIE_TOL)
-        if (err[b] <= 0.5 * rel_tol and np.all(err[close] <= 0.5 * rel_tol) and np.all(ranked)
-                and not char(jobs[j][0], lv, True).unresolved(ea[b], tau_all[jobs[j][1]])):
+        settled = (err[b] <= 0.5 * rel_tol and np.all(err[close] <= 0.5 * rel_tol)
+                   and (np.all(ranked) or lv == _top_level(base)) and not char(jobs[j][0], lv, True).unresolved(ea[b], tau_all[jobs[j][1]]))
+        tied[j] = settled and not np.all(ranked)  # only at the finest level (`_tie_immaterial`)
+        if settled and not tied[j]:
             conv_job[j] = True
             active[mine] = False
 
@@ -2468,7 +2471,7 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
                 add_j += [j] * len(found)
                 add_a += [x for x, _ in found]
                 add_t += [t for _, t in found]
-                conv_job[j] = False
+                conv_job[j] = tied[j] = False
                 active[mine] = True
             if lower is not None:
                 repaired[j] = True
@@ -2564,9 +2567,30 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
             hz, family = family_of.get(int(i), (np.nan, ()))
             branches.append((float(ea[i]), hz, float(et[i]), family, float(err[i])))
         a, hz, th, family, er = branches[0]
-        points.append(CriticalPoint(r, a, hz, th, family, base * 2.0**lv, er, bool(conv_job[j] and er <= rel_tol), verified[j],
+        settled = conv_job[j] or (tied[j] and _tie_immaterial(branches, frequencies))
+        points.append(CriticalPoint(r, a, hz, th, family, base * 2.0**lv, er, bool(settled and er <= rel_tol), verified[j],
                                     tuple((b[0], b[1], b[2]) for b in branches), bool(repaired[j])))
     return points, missed, ladders, lost
+
+
+#: Two boundary points too near to rank at the finest level (`TIE_TOL`) whose chatter frequencies
+#: agree within this fraction leave nothing open: either is the answer, depth and frequency.
+#: Seen in a blind check: 6.0279 / 6.0287 mm at 9339.8 / 9394.6 Hz (4 teeth, 277 rpm; their
+#: estimates 0.16 %) and 3.0668 / 3.0721 mm at 9839.5 / 9839.1 Hz (248 rpm, 0.30 %) were flagged
+#: not converged at 628 and 815 sub-steps a radian, where no finer level is left.
+TIE_FREQUENCY = 1e-2
+
+
+def _tie_immaterial(branches, frequencies: bool) -> bool:
+    """Whether the points of a job that cannot be ranked against its lowest (intervals depth x
+    (1 +- estimate) overlapping) leave its answer open: not where no frequency is asked (the depth
+    is the lowest either way, each within its estimate) or where all their frequencies agree
+    within TIE_FREQUENCY. `branches`: (depth, hz, theta, family, estimate), lowest first."""
+    a, hz, _, _, er = branches[0]
+    if not frequencies:
+        return True
+    tied_hz = [b[1] for b in branches[1:] if b[0] * (1.0 - b[4]) <= a * (1.0 + er)]
+    return bool(np.isfinite(hz)) and all(np.isfinite(f) and abs(f - hz) <= TIE_FREQUENCY * hz for f in tied_hz)
 
 
 def _dedupe(a, t, rel: float = 1e-5, index: bool = False):
