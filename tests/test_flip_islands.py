@@ -27,6 +27,7 @@ from posedyn.dynamics import ToolTipDynamics
 from posedyn.stability import Cut, floquet
 from posedyn.stability.cutting import force_matrix
 from posedyn.table import Mode
+from test_stability_multiscale import TABLE, structure
 
 BARE = ToolTipDynamics(
     np.array([13.349513937132706, 16.10584527590849, 18.39279996082013, 48.643461493152095, 67.65722018951783, 98.78340076507274, 1443.5, 5434.3, 1480.0, 5418.8]),
@@ -174,3 +175,34 @@ def test_an_island_found_at_the_finest_level_is_solved_there_not_left_unverified
     args = (HIGH_SPEED_ROWS, 8, 700e6, 210e6, 0.02, "down", 30000.0)
     below, above = (sim.analyse(*args, f * point.depth_m, t_sim=0.6) for f in (0.95, 1.05))
     assert below["sigma"] < 0 < above["sigma"] and above["fdom"] == pytest.approx(6000.0, rel=1e-3)
+
+
+STIFF_SPINDLE_ROWS = [("y", 2102.25, 0.03451, 7.6248e8), ("y", 11.7769, 0.0685, 3.2028e6), ("y", 17.8524, 0.07248, 3.9854e6),
+                      ("y", 10.0161, 0.05297, 2.3005e6), ("y", 6494.12, 0.0581, 2.5554e8), ("y", 2798.54, 0.0515, 1.2267e9),
+                      ("y", 4873.05, 0.02946, 7.0415e8), ("y", 24.532, 0.02706, 2.3067e6), ("x", 1746.81, 0.03375, 5.1897e6),
+                      ("x", 500.414, 0.04107, 1.2642e8), ("x", 6685.25, 0.03893, 3.6447e8), ("x", 8532.45, 0.03429, 7.7042e7)]
+
+
+def test_a_flip_lobe_of_a_stiff_spindle_mode_is_searched_with_that_mode():
+    """A blind check's case (7 teeth, full immersion, down milling, 14,082 rpm): the 2.8 kHz y mode
+    (1.2e9 N/m) has 0.099 % of the 24.5 Hz robot mode's peak compliance, and the search used to
+    leave it out as irrelevant; with it goes the flip point at 8.719 mm, so the full structure's
+    point could not be followed to a finer cut model (Newton ran to 10.435 mm) and the answer was
+    flagged not converged, estimate 16-20 %. Its own FRF term is 7.5 % of the FRF at 2.8 kHz: kept
+    now. Converged, and the independent simulation decays 5 % below and grows 5 % above."""
+    dyn = structure(STIFF_SPINDLE_ROWS)
+    kept = dyn.fn_hz[floquet.relevant_modes(dyn)]
+    assert 2798.54 in kept
+    cut = Cut(teeth=7, kt_pa=579.2e6, kn_pa=120.7e6, radial_immersion=1.0, milling="down")
+    point = floquet.critical_depth(dyn, cut, 14082.4)
+    assert point.converged and point.verified and point.rel_error_estimate < 0.01
+    assert point.theta_rad == pytest.approx(np.pi) and point.depth_m == pytest.approx(8.719e-3, rel=2e-3)
+    assert sim.grows_either_side(STIFF_SPINDLE_ROWS, cut, 14082.4, point.depth_m) == (False, True)
+
+
+def test_a_mode_invisible_in_the_frf_is_left_out_of_the_search():
+    """The issue-17 pose's 13.13 Hz x mode (9.9e9 N/m beside a 2.1e6 N/m mode at 12.59 Hz) is a
+    millionth of the FRF everywhere: left out; every other mode of that table is kept."""
+    dyn = structure(TABLE)
+    dropped = sorted(set(range(dyn.n_modes)) - set(floquet.relevant_modes(dyn)))
+    assert [round(float(dyn.fn_hz[i]), 4) for i in dropped] == [13.1342]
