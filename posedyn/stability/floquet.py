@@ -192,7 +192,7 @@ MAX_SUBSTEPS_PER_RAD = 512.0
 #: 2.8 kHz spindle mode 1,000 times less compliant than a 24 Hz robot mode was left out, and with
 #: it the flip lobe it makes at 8.72 mm (7 teeth, full immersion, 14,082 rpm; a blind check).
 IRRELEVANT = 1e-3
-RELEVANCE_PER_DECADE = 10
+RELEVANCE_PER_DECADE = 10  # log-spaced frequencies a decade of that check, besides the modes' own
 #: Seeds refined at the coarse level (lowest zeroth-order depths first), plus the lowest
 #: SEEDS_PER_MODE of every mode's band.
 MAX_SEEDS = 12
@@ -322,7 +322,7 @@ def relevant_modes(dyn: ToolTipDynamics) -> np.ndarray:
     w = np.concatenate([wn, np.geomspace(wn.min() / 3.0, 3.0 * wn.max(), int(np.ceil(RELEVANCE_PER_DECADE * np.log10(9.0 * wn.max() / wn.min()))) + 1)])
     modal = 1.0 / (wn[None, :] ** 2 - w[:, None] ** 2 + 2j * dyn.zeta[None, :] * wn[None, :] * w[:, None])  # (frequency, mode)
     own = np.abs(modal) * (np.linalg.norm(dyn.shapes, axis=0) * np.linalg.norm(dyn.force_shapes, axis=0))[None, :]
-    H = np.linalg.norm(np.einsum("ir,fr,jr->fij", dyn.shapes, modal, dyn.force_shapes), axis=(1, 2))
+    H = np.linalg.norm(dyn.frf(w), axis=(1, 2))
     return np.flatnonzero(np.any(own >= IRRELEVANT * H[:, None], axis=0))
 
 
@@ -2643,7 +2643,6 @@ def _step_level(char, level, a_prev, t_prev, tau, Gc, vec):
     vec = np.where((t_new > np.pi)[:, None], np.conj(vec), vec)
     t_new = np.where(ok, np.where(t_new > np.pi, 2 * np.pi - t_new, t_new), t_prev)
     return a_new, t_new, ok, Gc, vec
-
 
 
 def _step_estimate(char, level, a_prev, t_prev, tau, Gc, vec):
