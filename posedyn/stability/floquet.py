@@ -269,6 +269,10 @@ VERIFY_FRACTION = 0.995
 #: -42). There the count is not resolved (the bisection then takes the depth as unstable, a
 #: verification fails), without samples.
 MONODROMY_LIMIT = 1e10
+#: A structure's characteristic keeps the monodromies of its last call with at most this many
+#: rows: the same batch asked again (a look-ahead's one-step estimate and the Newton to the root
+#: from the same point; a flip scan's depths) is returned without its exponentials.
+REPEAT_ROWS = 64
 #: Frequency grid: half-width around each mode in units of zeta w, and points per w_T.
 BAND_ZETAS = 8.0
 POINTS_PER_TOOTH_FREQUENCY = 10
@@ -483,12 +487,17 @@ class FloquetCharacteristic:
         c = _complex_or_real(c)
         tau = np.broadcast_to(np.asarray(tau, dtype=float).reshape(-1), c.shape)
         blocks = _blocks(len(c), len(self.fraction) * (2 * self.n) ** 2 * c.itemsize)
+        last = self.__dict__.get("_last_monodromy")
+        if last is not None and last[0].dtype == c.dtype and np.array_equal(last[0], c) and np.array_equal(last[1], tau):
+            return last[2].copy()
         if len(blocks) > 1:
             return np.concatenate([self.monodromy(c[lo:hi], tau[lo:hi]) for lo, hi in blocks])
         E = self.exponentials(c, tau)
         M = E[0]
         for i in range(1, len(E)):
             M = E[i] @ M
+        if len(c) <= REPEAT_ROWS:
+            self._last_monodromy = (c.copy(), tau.copy(), M.copy())
         return M
 
     def exponentials(self, c: np.ndarray, tau: np.ndarray) -> np.ndarray:
