@@ -144,3 +144,34 @@ def test_levels_that_agree_on_an_aliased_mode_are_not_converged():
     assert r.converged
     assert 1.03e-3 <= r.depth_m <= 1.11e-3
     assert r.chatter_hz == pytest.approx(9406.7, abs=2 * 7.07)
+
+
+# c097 of a blind check: 7-12 Hz robot modes under 8.1-9.0 kHz spindle modes, 2 teeth at 239 rpm
+C097_ROWS = [("x", 7.17259, 0.02451, 1709100.0), ("x", 9018.76, 0.0161, 43448000.0), ("y", 7.17014, 0.02499, 3426200.0),
+             ("x", 10.3141, 0.04999, 32873000.0), ("y", 8148.3, 0.01732, 1989500000.0), ("y", 8153.64, 0.02066, 4813100.0),
+             ("y", 8586.77, 0.02072, 141420000.0), ("y", 11.6522, 0.03203, 4446100.0)]
+C097_CUT = Cut(teeth=2, kt_pa=1088.8e6, kn_pa=421.5e6, radial_immersion=0.0958, milling="down")
+
+
+def test_a_point_lost_twice_in_place_skips_the_aliased_levels(monkeypatch):
+    """c097: the 8.15 kHz y mode is 9 times as stiff as the cut and vibrates 1000 times a tooth
+    period. Newton cannot follow its branch from one level to the next (0.4421 mm at 19 sub-steps
+    a radian, 0.4399 at 38, ...: the branch stays put), and each loss solved the job again from
+    the seeds one level up, level by level to the finest (70 s at the default finest level). A
+    second loss in place now goes on at the first level that resolves that mode (here the
+    finest, lowered to 76 a radian to keep the test short): the answer the level-by-level chain
+    gives (0.43948792 mm, measured with the code before), without the solve at 38."""
+    monkeypatch.setattr(floquet, "MAX_SUBSTEPS_PER_RAD", 64.0)
+    resolutions = []
+    solve = floquet._solve
+
+    def counted(*args, **kwargs):
+        resolutions.append(args[4])
+        return solve(*args, **kwargs)
+
+    monkeypatch.setattr(floquet, "_solve", counted)
+    p = floquet.critical_depth(structure(C097_ROWS), C097_CUT, 238.93)
+    assert p.converged and p.verified
+    assert p.depth_m == pytest.approx(0.4394879238e-3, rel=1e-6)
+    base = floquet.coarsest_substeps(C097_CUT)
+    assert resolutions == [None, pytest.approx(2 * base), pytest.approx(8 * base)]
