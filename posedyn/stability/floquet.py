@@ -139,7 +139,8 @@ as stiff that chatters): its sub-step was near a whole number of its periods at 
 levels (15.5 down to 0.97), which all converged to a depth 0.83 % too deep. Requiring the whole
 convergence at such a level instead cost 32 % more on the bench sweep, whose rows it left alone.
 A point Newton cannot follow to the next level is dropped where its job has others; a job none
-of whose points follows is solved again from the seeds at that level; a point at the finest level
+of whose points follows is solved again from the seeds at that level (one lost there again, in
+place, at the first level that resolves its stiff modes: `_unaliased_substeps`); a point at the finest level
 with no estimate takes it from one level down. Which of two near points is the lowest (the
 chatter frequency) counts as settled only where their intervals, depth x (1 +- estimate), are
 apart or both estimates are below TIE_TOL; the verification's interpolant is made rel_tol above
