@@ -140,7 +140,7 @@ levels (15.5 down to 0.97), which all converged to a depth 0.83 % too deep. Requ
 convergence at such a level instead cost 32 % more on the bench sweep, whose rows it left alone.
 A point Newton cannot follow to the next level is dropped where its job has others; a job none
 of whose points follows is solved again from the seeds at that level (one lost there again, in
-place, at the first level that resolves its stiff modes: `_unaliased_substeps`); a point at the finest level
+place, at the first level that resolves its stiff modes: `_unaliased_level`); a point at the finest level
 with no estimate takes it from one level down. Which of two near points is the lowest (the
 chatter frequency) counts as settled only where their intervals, depth x (1 +- estimate), are
 apart or both estimates are below TIE_TOL; the verification's interpolant is made rel_tol above
@@ -487,10 +487,10 @@ class FloquetCharacteristic:
         batch in blocks whose exponentials stay within SEGMENT_BLOCK_BYTES."""
         c = _complex_or_real(c)
         tau = np.broadcast_to(np.asarray(tau, dtype=float).reshape(-1), c.shape)
-        blocks = _blocks(len(c), len(self.fraction) * (2 * self.n) ** 2 * c.itemsize)
         last = self.__dict__.get("_last_monodromy")
         if last is not None and last[0].dtype == c.dtype and np.array_equal(last[0], c) and np.array_equal(last[1], tau):
             return last[2].copy()
+        blocks = _blocks(len(c), len(self.fraction) * (2 * self.n) ** 2 * c.itemsize)
         if len(blocks) > 1:
             return np.concatenate([self.monodromy(c[lo:hi], tau[lo:hi]) for lo, hi in blocks])
         E = self.exponentials(c, tau)
@@ -1942,7 +1942,7 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
     Newton could not follow to this resolution (`_finish_all`); where its point here is lost again
     within rel_tol / 2 of that depth (a branch that stays put but that Newton cannot take from one
     level to the next), the job goes on at the first level that resolves its stiff modes
-    (`_unaliased_substeps`) instead of the next."""
+    (`_unaliased_level`) instead of the next."""
     rpm = np.asarray(rpm, dtype=float).reshape(-1)
     if np.any(~np.isfinite(rpm) | (rpm <= 0)):
         raise InputError("spindle speeds > 0 rpm", got=rpm[~np.isfinite(rpm) | (rpm <= 0)][0], column="rpm")
@@ -2133,10 +2133,17 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
 
     for j in np.flatnonzero(lost):  # no point followed to the finer cut model: from the seeds there
         if points[j] is not None:
-            substeps = points[j].substeps_per_rad
-            if lost_before is not None and abs(points[j].depth_m - lost_before) <= 0.5 * rel_tol * points[j].depth_m:  # lost again, in place: the cut models in between alias a stiff mode
-                substeps = _unaliased_substeps(char(jobs[j][0], _level(substeps, base), True), points[j].depth_m, tau_all[jobs[j][1]], base, _level(substeps, base))
-            redo = solve_again(j, substeps, check=bool(verify or hinted[j]), lost=points[j].depth_m)
+            lv = _level(points[j].substeps_per_rad, base)
+            if lost_before is not None and abs(points[j].depth_m - lost_before) <= 0.5 * rel_tol * points[j].depth_m:
+                # lost again, in place: the cut models in between alias a stiff mode. A blind check's
+                # c097 (2 teeth at 239 rpm, an 8.15 kHz mode 9 times as stiff as the cut, 1000 of its
+                # periods a tooth period) lost its point, at 0.4421, 0.4399, 0.4396 ... mm, one level
+                # up from each of 19, 38, ... 305 sub-steps a radian and was solved from the seeds at
+                # each next one (70 s); no level up to the finest, 610, resolves that mode, and the
+                # answer comes from there (0.4394 mm, the same in 39 s). Where the lost points move
+                # (1.94 / 2.17 mm at 32 / 64 on another) the levels go on one by one.
+                lv = _unaliased_level(char(jobs[j][0], lv, True), points[j].depth_m, tau_all[jobs[j][1]], lv, lv, _top_level(base))
+            redo = solve_again(j, base * 2.0**lv, check=bool(verify or hinted[j]), lost=points[j].depth_m)
             if np.isfinite(redo.depth_m) and redo.depth_m > 0:  # the lost point bounds nothing at that resolution
                 points[j] = redo
                 missed[j] = False
@@ -2218,19 +2225,12 @@ def _solve(dyns, cut, rpm, rel_tol, substeps_per_rad, verify, pairs=False, branc
     return results
 
 
-def _unaliased_substeps(char, a: float, tau: float, base: float, level: int) -> float:
-    """The resolution a job lost twice in place (`_solve`'s `lost_before`) is solved again at: the
-    first level from `level` up at which no mode at most ALIAS_MODE times as stiff as the cut at
-    depth a has more than ALIAS_PERIODS of its periods in a sub-step (`unresolved(look=True)`),
-    else the finest. A blind check's case (2 teeth at 239 rpm, an 8.15 kHz mode 9 times as stiff
-    as the cut, 1000 of its periods in a tooth period) lost its point, at 0.4421, 0.4399, 0.4396
-    ... mm, one level up from each of 19, 38, ... 305 sub-steps a radian, and each loss solved it
-    again from the seeds at the next (70 s); no level up to the finest, 610, resolves that mode,
-    and the answer comes from there (0.4394 mm, the same in 39 s). Where the lost points move
-    (1.94 / 2.17 mm at 32 / 64 on another) the levels go on one by one."""
-    top = _top_level(base)
-    k = next((k for k in range(top - level + 1) if not char.unresolved(a, tau, look=True, finer=k)), top - level)
-    return base * 2.0 ** (level + k)
+def _unaliased_level(char, a: float, tau: float, level: int, start: int, top: int) -> int:
+    """The first level from `start` below `top` at which no mode at most ALIAS_MODE times as stiff
+    as the cut at depth a has more than ALIAS_PERIODS of its periods in a sub-step (`char`, the
+    cut model at `level`: `unresolved(look=True)`), else `top`: where the look-ahead estimates a
+    converged job's error, and where a job lost twice in place is solved again (`_solve`)."""
+    return next((lv for lv in range(start, top) if not char.unresolved(a, tau, look=True, finer=lv - level)), top)
 
 
 def _verify_count(char, a: float, tau: float, thetas, above: float | None = None):
@@ -2442,8 +2442,7 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
         if not done or level + 1 > top:
             return
         low = np.array([mine[np.argmin(ea[mine])] for mine in (np.flatnonzero(ej == j) for j in done)])
-        ahead = np.array([next((lv for lv in range(level + 1, top) if not char(jobs[ej[i]][0], level, True).unresolved(ea[i], etau[i], look=True, finer=lv - level)), top)
-                          for i in low])
+        ahead = np.array([_unaliased_level(char(jobs[ej[i]][0], level, True), ea[i], etau[i], level, level + 1, top) for i in low])
         for lv in np.unique(ahead):
             sel = low[ahead == lv]
             v_in = None if vec is None else [vec[i] for i in sel]
