@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from absorber.coupling import with_absorber
 from posedyn.stability import floquet
 from test_stability_multiscale import CUT, TABLE, structure
 
@@ -58,3 +59,32 @@ def test_starts_from_dissimilar_structures_are_caught_by_the_count(from_seeds, m
     monkeypatch.setattr(floquet, "_solve", spy)
     _same([from_seeds[i] for i in order], floquet.critical_depths([PATH[i] for i in order], CUT, 2000.0, verify=True, continuation=True))
     assert sum(retried) >= 1
+
+
+#: The path's last five structures with an absorber (5 kg tuned to 29 Hz, zeta 0.07): their
+#: answers (5.5-13.9 mm) need 32 sub-steps a radian, one level above the first refined.
+ABSORBED = [with_absorber(p, 5.0, 5.0 * (2.0 * np.pi * 29.0) ** 2, 0.07) for p in PATH[5:]]
+
+
+def test_a_continued_job_still_refining_is_counted_at_its_own_resolution_only(monkeypatch):
+    """A continued (hinted) job that has not settled at the first refined level gets its winding
+    count at the resolution its answer ends at, not also at the first refined one (which a finer
+    answer repeats anyway), and the answers stay those from the seeds. (A job settled there is
+    counted there; what that count finds can still take it finer.)"""
+    seeded = floquet.critical_depths(ABSORBED, CUT, 2000.0, verify=True)
+    counted = []
+    verify_count = floquet._verify_count
+
+    def spy(char, *args, **kwargs):
+        counted.append((id(char.dyn), char.substeps_per_rad))
+        return verify_count(char, *args, **kwargs)
+
+    monkeypatch.setattr(floquet, "_verify_count", spy)
+    monkeypatch.setattr(floquet, "modal_path", lambda structures: np.arange(len(structures)))
+    continued = floquet.critical_depths(ABSORBED, CUT, 2000.0, verify=True, continuation=True)
+    _same(seeded, continued)
+    first_refined = 2.0 * floquet.coarsest_substeps(CUT)
+    finer = [k for k, p in enumerate(continued) if k > 0 and p.substeps_per_rad > first_refined]  # k = 0: from the seeds (not hinted)
+    levels = {k: [lv for ident, lv in counted if ident == id(ABSORBED[k])] for k in finer}
+    assert finer and all(continued[k].substeps_per_rad in levels[k] for k in finer)
+    assert any(first_refined not in levels[k] for k in finer)

@@ -67,7 +67,10 @@ than the sampling can see is not excluded). The count runs on the cut model of t
 level (where 9 in 10 sweep answers end) and, where the answer needed a finer one, once more at
 the answer's own resolution (where not 0 there, the job is solved again from the seeds at that
 resolution): a branch that a coarser model puts above the answer can lie below it with the
-answer's (blind search: 3-8 % too deep, verified on the coarse level).
+answer's (blind search: 3-8 % too deep, verified on the coarse level). A continued job that is
+still refining at the first refined level is counted at its answer's resolution only (a count
+there that is not 0, or that shows more crossings up to rel_tol above than its points bring,
+sends it back to the seeds): the coarse count would be repeated finer anyway.
 h is sampled on an interpolant (`segment_interpolants`, `circle_monodromies`,
 `monodromy_polynomial`: M(a (1 - nu)) is entire in nu, each segment's exponential needs 8-16
 Taylor terms), every sample with a Rouche bound on the interpolant's error, else directly. A
@@ -2479,12 +2482,18 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
     # verified at the first refined level (where 9 in 10 sweep answers end; a lower branch at
     # the answer's own cut model that the coarse one puts above it is missed by a count there:
     # seen 3-8 % too deep in the blind search), lower branches repaired there (at the coarse
-    # level where no level above the first is left to estimate a repaired point's error)
+    # level where no level above the first is left to estimate a repaired point's error); a
+    # hinted job not settled there is counted at its own resolution only (below: 4-12 % of a
+    # sweep chunk's exponentials and samples, the same rows)
     vlevel = level
+    deferred = np.zeros(J, bool)
     if verify or hinted.any():
         add_j, add_a, add_t = [], [], []
         for j, (s, e) in enumerate(jobs):
             if not (verify or hinted[j]):
+                continue
+            if hinted[j] and not (conv_job[j] or tied[j] or lost[j]) and np.any(ej == j):  # still refining: counted at its own resolution
+                deferred[j] = True
                 continue
             tau = tau_all[e]
             cv = char(s, vlevel, True)
@@ -2586,9 +2595,19 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
     for j, (s, e) in enumerate(jobs):
         mine = np.flatnonzero(ej == j)
         lv = int(level_job[j])
-        if len(mine) and (verify or hinted[j]) and not retry[j] and lv > vlevel:
-            count, resolved, rung, _, _ = _verify_count(char(s, lv, True), VERIFY_FRACTION * ea[mine].min(), tau_all[e], et[mine])
-            missed[j] = not (count == 0 and resolved and rung is None)
+        if len(mine) and (verify or hinted[j]) and not retry[j] and (lv > vlevel or deferred[j]):
+            top = ea[mine].min()
+            above = (1.0 + rel_tol) * top if deferred[j] else None
+            count, resolved, rung, ladder, count_above = _verify_count(char(s, lv, True), VERIFY_FRACTION * top, tau_all[e], et[mine], above)
+            # (a job counted here only: more crossings up to rel_tol above than its points bring is
+            # a branch the search missed, as at the first refined level)
+            missed[j] = not (count == 0 and resolved and rung is None) or (count_above is not None and count_above > _crossings(et[mine][ea[mine] <= above]))
+            if deferred[j]:
+                if missed[j] and hinted[j]:
+                    retry[j], missed[j] = True, False
+                verified[j] = not missed[j]
+                if ladder is not None and not missed[j]:
+                    ladders[j] = (lv,) + ladder
     # chatter frequencies, batched per (structure, resolution)
     wanted: dict = {}
     for j, (s, e) in enumerate(jobs):
