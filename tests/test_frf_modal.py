@@ -1,6 +1,7 @@
 """FRF import (CSV, UFF) and modal identification against known modes."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -163,6 +164,40 @@ def test_bad_frf_files_get_clear_errors(tmp_path, text, words):
     with pytest.raises(InputError) as info:
         read_frf_csv(path)
     assert words in str(info.value) and "bad.csv" in str(info.value)
+
+
+def _uff(path, sets):
+    """A UFF file of (data, rsp_dir, ref_dir, id2) datasets at 1-400 Hz (receptance)."""
+    import pyuff
+
+    f = np.linspace(1.0, 400.0, 200)
+    pyuff.UFF(str(path)).write_sets([pyuff.prepare_58(binary=0, func_type=4, id1="t", id2=id2, rsp_node=1, rsp_dir=r, ref_node=1, ref_dir=c, data=d(f), x=f,
+                                                      abscissa_spec_data_type=18, ordinate_spec_data_type=8, orddenom_spec_data_type=13)
+                                     for d, r, c, id2 in sets], mode="overwrite")
+    return path
+
+
+POSE_ID2 = "pose_id=U;x_mm=1400;y_mm=0;z_mm=800;beta_deg=0"
+
+
+def test_uff_negative_directions_flip_the_sign_and_bad_directions_or_pose_keys_are_refused(tmp_path):
+    """UFF direction -2 is measured along -y: the FRF along +y is the measured one times the signs
+    of both directions (a cross term read with the wrong sign made a 0.72 mm cut read 12.65 mm)."""
+    hxy = lambda f: receptance(f, TRUE[:1]) * 0.5
+    plus = read_frf(_uff(tmp_path / "plus.uff", [(hxy, 1, 2, POSE_ID2), (hxy, 2, 2, POSE_ID2)]))
+    minus = read_frf(_uff(tmp_path / "minus.uff", [(lambda f: -hxy(f), 1, -2, POSE_ID2), (hxy, -2, -2, POSE_ID2)]))
+    for n in ("h_xy", "h_yy"):
+        assert np.array_equal(minus.frf[n], plus.frf[n])
+    refused = {
+        "dir0": ([(hxy, 1, 1, POSE_ID2), (hxy, 0, 0, POSE_ID2)], "row 2, column 'rsp_dir'"),
+        "dir4": ([(hxy, 1, 4, POSE_ID2)], "row 1, column 'ref_dir'"),
+        "twice": ([(hxy, 1, 1, POSE_ID2 + ";x_mm=1500")], "x_mm twice"),
+        "unknown": ([(hxy, 1, 1, POSE_ID2 + ";colour=red")], "colour"),
+        "two poses": ([(hxy, 1, 1, POSE_ID2), (hxy, 2, 2, POSE_ID2.replace("1400", "1500"))], "row 2, column 'id2 x_mm'"),
+    }
+    for name, (sets, words) in refused.items():
+        with pytest.raises(InputError, match=re.escape(words)):
+            read_frf(_uff(tmp_path / f"{name}.uff", sets))
 
 
 def test_pose_model_learns_cross_coupling_and_predicts_coupled_modes():

@@ -14,8 +14,9 @@ Header keys:
     # beta_deg = 0                                       (or a_deg, b_deg, c_deg; q1_deg..q6_deg)
 
 UFF: each dataset 58 with function type 4 (FRF) is one FRF; response and reference directions
-(1 = x, 2 = y, 3 = z) name it, ordinate type 8 / 11 / 12 gives displacement / velocity /
-acceleration, and `id2` holds the pose as `pose_id=P1;x_mm=1500;...`. Files are written in
+(1 = x, 2 = y, 3 = z; negative: measured along the negative axis, the FRF's sign follows) name it,
+ordinate type 8 / 11 / 12 gives displacement / velocity / acceleration, and `id2` holds the pose
+as `pose_id=P1;x_mm=1500;...` (the CSV header's pose keys, each once, the same in every dataset). Files are written in
 ASCII (pyuff's binary writer does not read back): values keep 12-13 significant digits, so a
 first write-then-read agrees to about 1e-12 and every later read-write-read is exact.
 
@@ -251,26 +252,49 @@ def read_frf_uff(path: str | os.PathLike) -> FRFSet:
         raise InputError("at least one dataset 58 with function type 4 (FRF)", got="none", file=name)
     by_type = {v: k for k, v in UFF_ORDINATE.items()}
     f = np.asarray(sets[0]["x"], dtype=float)
-    frf, pose, pose_id = {}, {}, path.stem
+    frf, pose, pose_id, seen = {}, {}, path.stem, {}
     for k, s in enumerate(sets, 1):
         quantity = by_type.get(int(s.get("ordinate_spec_data_type", 8)))
         if quantity is None:
             raise InputError("ordinate type 8, 11 or 12 (displacement, velocity, acceleration)", got=s.get("ordinate_spec_data_type"), file=name, row=k, column="ordinate_spec_data_type")
         if not np.array_equal(np.asarray(s["x"], dtype=float), f):
             raise InputError("the same frequencies in every dataset", file=name, row=k, column="x")
-        try:
-            key = f"h_{DIRS[abs(int(s['rsp_dir'])) - 1]}{DIRS[abs(int(s['ref_dir'])) - 1]}"
-        except (IndexError, ValueError):
-            raise InputError("response and reference directions 1-3", got=(s.get("rsp_dir"), s.get("ref_dir")), file=name, row=k, column="rsp_dir") from None
+        directions = []
+        for column in ("rsp_dir", "ref_dir"):
+            try:
+                d = int(s[column])
+            except (KeyError, TypeError, ValueError):
+                d = 0
+            if not 1 <= abs(d) <= 3:
+                raise InputError("a direction 1, 2, 3 (x, y, z) or -1, -2, -3 (measured along -x, -y, -z)", got=s.get(column), file=name, row=k, column=column)
+            directions.append(d)
+        key = f"h_{DIRS[abs(directions[0]) - 1]}{DIRS[abs(directions[1]) - 1]}"
         if key in frf:
             raise InputError("one dataset per response and reference direction", got=f"{key} twice", file=name, row=k, column="rsp_dir")
-        frf[key] = to_receptance(np.asarray(s["data"], dtype=complex), f, quantity)
+        # a negative direction is measured along the negative axis: H along +response, +reference
+        # is the measured one times the signs of both
+        sign = float(np.sign(directions[0]) * np.sign(directions[1]))
+        frf[key] = sign * to_receptance(np.asarray(s["data"], dtype=complex), f, quantity)
+        given = {}
         for item in str(s.get("id2", "")).split(";"):
             k_, sep, v = item.partition("=")
-            if sep and k_.strip() == "pose_id":
-                pose_id = v.strip()
-            elif sep and k_.strip() in POSE_KEYS:
-                pose[k_.strip()] = _pose_value(v, file=name, row=k, column=f"id2 {k_.strip()}")
+            k_ = k_.strip()
+            if not sep:  # (free text without "=")
+                continue
+            if k_ not in HEADER_KEYS[2:]:
+                raise InputError("id2 keys among " + ", ".join(HEADER_KEYS[2:]), got=k_, file=name, row=k, column="id2")
+            if k_ in given:
+                raise InputError("each id2 key once", got=f"{k_} twice", file=name, row=k, column=f"id2 {k_}")
+            given[k_] = v.strip() if k_ == "pose_id" else _pose_value(v, file=name, row=k, column=f"id2 {k_}")
+        for k_, v in given.items():  # the datasets of one file are one pose
+            known = pose_id if k_ == "pose_id" else pose.get(k_)
+            if k > 1 and k_ in seen and known != v:
+                raise InputError(f"the same {k_} in every dataset (dataset {seen[k_]}: {known})", got=v, file=name, row=k, column=f"id2 {k_}")
+            seen.setdefault(k_, k)
+            if k_ == "pose_id":
+                pose_id = v
+            else:
+                pose[k_] = v
     return FRFSet(frequency_hz=f, frf=frf, pose_id=pose_id, pose=pose, source=name)
 
 
