@@ -50,6 +50,18 @@ def test_train_with_one_pose_folds_is_valid_json_and_says_why_r2_is_null(small):
     assert (small / "model" / "cut.toml").read_text() == CUT.read_text()
 
 
+def test_a_refused_fold_count_leaves_an_existing_model_as_it_was(small, tmp_path):
+    """`train --cv 1` (or more folds than poses) is refused before anything is written: it had
+    replaced the model directory's files and deleted its cut, then failed."""
+    model = tmp_path / "model"
+    json_in_process("train", small / "three.csv", "--cv", "0", "--cut", CUT, "--out", model)
+    before = {p.name: p.read_bytes() for p in model.iterdir()}
+    for folds in ("1", "4"):
+        code, _, err = cli_in_process("train", small / "three.csv", "--cv", folds, "--out", model)
+        assert code == 2 and "--cv" in err and "between 2 and 3 folds" in err
+        assert {p.name: p.read_bytes() for p in model.iterdir()} == before
+
+
 def test_every_command_prints_strict_json_on_small_inputs(small, tmp_path):
     if not (small / "model").exists():
         json_in_process("train", small / "three.csv", "--cv", "0", "--cut", CUT, "--out", small / "model")

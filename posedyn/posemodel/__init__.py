@@ -4,11 +4,11 @@ coregionalized multi-task, and with the twin as a physics prior (`model`), on th
 
 from posedyn.posemodel._gp import GP, fit_gp, fit_gps
 from posedyn.posemodel.model import (
-    CROSS, METHODS, PARAMS, PhysicsPrior, PoseModel, cross_validate, feature_matrix, parse_target, pose_joints,
+    CROSS, METHODS, PARAMS, PhysicsPrior, PoseModel, check_folds, cross_validate, feature_matrix, parse_target, pose_joints,
     r2_score, select_features, suspect_measurements, table_targets, target_name, training_hash,
 )
 
 __all__ = [
-    "CROSS", "GP", "METHODS", "PARAMS", "PhysicsPrior", "PoseModel", "cross_validate", "feature_matrix", "fit_gp", "fit_gps",
+    "CROSS", "GP", "METHODS", "PARAMS", "PhysicsPrior", "PoseModel", "check_folds", "cross_validate", "feature_matrix", "fit_gp", "fit_gps",
     "parse_target", "pose_joints", "r2_score", "select_features", "suspect_measurements", "table_targets", "target_name", "training_hash",
 ]

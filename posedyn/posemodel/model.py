@@ -508,6 +508,12 @@ def r2_score(predicted: np.ndarray, actual: np.ndarray) -> float:
     return float(1.0 - np.sum((predicted - actual) ** 2) / ss)
 
 
+def check_folds(folds: int, n_poses: int) -> None:
+    """The k of a k-fold cross-validation over n_poses poses: 2 <= k <= n_poses."""
+    if not 2 <= folds <= n_poses:
+        raise InputError(f"between 2 and {n_poses} folds", got=folds, column="--cv")
+
+
 def cross_validate(make_model, table: ModalTable, folds: int = 5, seed: int = 0) -> dict:
     """k-fold cross-validation over poses (seed 003 section 5.2): per target the mean and
     sample standard deviation of R^2 over the folds, the R^2 of all held-out predictions pooled,
@@ -517,8 +523,7 @@ def cross_validate(make_model, table: ModalTable, folds: int = 5, seed: int = 0)
     whose values do not vary): the mean and std then cover the folds where it is defined, are
     None where fewer than one (mean) or two (std) folds have it, and `note` says so."""
     n = len(table.poses)
-    if not 2 <= folds <= n:
-        raise InputError(f"between 2 and {n} folds", got=folds, column="--cv")
+    check_folds(folds, n)
     order = np.random.default_rng(seed).permutation(n)
     parts = np.array_split(order, folds)
     names, Y = table_targets(table)

@@ -16,7 +16,7 @@ from posedyn.io.atomic import write_text_atomic
 from posedyn.io.cut import read_cut
 from posedyn.io.model_dir import check_model_target, load_model, save_model
 from posedyn.io.twin_file import load_twin
-from posedyn.posemodel import PoseModel, cross_validate
+from posedyn.posemodel import PoseModel, check_folds, cross_validate
 from posedyn.posemodel import r2_score, suspect_measurements, table_targets
 from posedyn.posemodel.model import MODE_MATCH_FN, MODE_MATCH_K
 from service.cli.common import console, output_file, print_json
@@ -50,14 +50,13 @@ def train(
     test = read_modal_table(holdout) if holdout is not None else None  # before training: an error after it left the model written
     names = [c.strip() for c in features.split(",")] if features else None
     robot_twin = load_twin(twin) if method is Method.physics else None
+    if cv:
+        check_folds(cv, len(table.poses))  # before anything is written (a refused --cv had replaced the model)
 
     def make():
         return PoseModel(method.value, names, n_restarts=restarts, random_state=seed, twin=robot_twin)
 
     model = make().fit(table)
-    save_model(model, out)
-    if cut is not None:
-        write_text_atomic(out / "cut.toml", cut.read_text(encoding="utf-8"))
     report = {"method": method.value, "n_poses": len(table.poses), "cv": {}, "suspects": suspect_measurements(model, table)}
     if cv:
         report["cv"] = cross_validate(make, table, folds=cv, seed=seed)
@@ -69,6 +68,9 @@ def train(
             for j, t in enumerate(names_h)
             if t in model.targets_
         }
+    save_model(model, out)  # once everything that can fail has run
+    if cut is not None:
+        write_text_atomic(out / "cut.toml", cut.read_text(encoding="utf-8"))
     if model.physics_ is not None:
         report["physics"] = {k: v for k, v in model.physics_.items() if k in ("used", "reason", "stiffness_scales", "fit_converged", "mode_map", "modes_without_prior",
                                                                            "targets_without_prior")}
