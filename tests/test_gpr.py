@@ -2,6 +2,7 @@
 seed 004's reproduction, MTGP vs STGP, the physics prior, calibration, persistence, CLI."""
 
 import json
+import re
 import math
 
 import numpy as np
@@ -365,6 +366,15 @@ def test_model_directory_round_trip_and_schema_check(twin, campaign, tmp_path):
     (tmp_path / "stgp/model.json").write_text(json.dumps(doc))
     with pytest.raises(InputError, match=r"model\.json, column 'schema_version': expected schema_version 1.*got 99"):
         load_model(tmp_path / "stgp")
+    # damaged files: an error that names the file, no traceback (a truncated arrays.npz was a BadZipFile)
+    arrays = tmp_path / "mtgp/arrays.npz"
+    arrays.write_bytes(arrays.read_bytes()[:100])
+    with pytest.raises(InputError, match=r"arrays\.npz: expected arrays\.npz with X_train and Z_train, got 'BadZipFile"):
+        load_model(tmp_path / "mtgp")
+    for text, words in ((b"[1, 2]", "expected a JSON object, got 'list'"), (b"\xff\xfe{}", "expected UTF-8 text")):
+        (tmp_path / "physics/model.json").write_bytes(text)
+        with pytest.raises(InputError, match=re.escape(words)):
+            load_model(tmp_path / "physics")
 
 
 def test_physics_falls_back_without_reachable_poses(twin, datasets):

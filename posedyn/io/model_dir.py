@@ -9,6 +9,7 @@ import json
 import os
 import shutil
 import tempfile
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -123,14 +124,18 @@ def load_model(folder: str | os.PathLike) -> PoseModel:
         raise InputError("a model directory with model.json", got=exc.strerror, file=str(path)) from None
     except json.JSONDecodeError as exc:
         raise InputError("valid JSON", got=str(exc), file=str(path), line=exc.lineno) from None
+    except UnicodeDecodeError as exc:
+        raise InputError("UTF-8 text", got=f"byte offset {exc.start}", file=str(path)) from None
+    if not isinstance(doc, dict):
+        raise InputError("a JSON object", got=type(doc).__name__, file=str(path))
     version = doc.get("schema_version")
     if version != SCHEMA_VERSION:
         raise InputError(f"schema_version {SCHEMA_VERSION} (this posedyn reads only that)", got=version, file=str(path), column="schema_version")
     try:
         with np.load(folder / "arrays.npz", allow_pickle=False) as arrays:
             X, Z = arrays["X_train"], arrays["Z_train"]
-    except (OSError, KeyError, ValueError) as exc:
-        raise InputError("arrays.npz with X_train and Z_train", got=str(exc), file=str(folder / "arrays.npz")) from None
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile, EOFError) as exc:  # (a truncated or foreign file: BadZipFile)
+        raise InputError("arrays.npz with X_train and Z_train", got=f"{type(exc).__name__}: {exc}", file=str(folder / "arrays.npz")) from None
     try:
         model = PoseModel(method=doc["method"], features=doc["features"])
         model.features_ = list(doc["features"])
@@ -163,6 +168,8 @@ def load_model(folder: str | os.PathLike) -> PoseModel:
                                               model.physics_.get("mode_map"))  # (absent before 2026-12-04: mode m was the twin's row m)
             model.prior_targets_ = np.array(model.physics_["prior_targets"])
             model.twin = (robot, params)
-    except (KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
         raise InputError("a complete model.json", got=f"{type(exc).__name__}: {exc}", file=str(path)) from None
+    except OSError as exc:  # the robot file a physics model names
+        raise InputError("the robot file model.json names", got=exc.strerror, file=str(exc.filename or path)) from None
     return model
