@@ -228,6 +228,31 @@ def test_sweep_with_a_trained_model_reports_uncertainty_and_equals_posedyn_sched
         assert single["dominant_chatter_hz"] == pytest.approx(float(row["dominant_chatter_hz"]), rel=5e-3)
 
 
+def test_a_model_without_a_twin_has_its_reach_decided_by_the_shipped_twin(tmp_path):
+    """README, Defaults: a model without a twin of its own (stgp), with a grid that names none, still
+    has its poses' reach decided (by the shipped twin): the sweep flags the far pose `unreachable`
+    and `posedyn schedule` refuses it, as `posedyn serve` does (`unreachable_pose`); both used to
+    give it numbers."""
+    from service.sweep import SweepSpec
+    from service.sweep.chunk import compute_chunk
+    from service.sweep.spec import read_sweep_poses
+
+    model = PoseModel(method="stgp").fit(read_modal_table(ROOT / "datasets/campaigns/seed003_twin_s1.csv"))
+    save_model(model, tmp_path / "model")
+    grid = tmp_path / "grid.toml"
+    grid.write_text("\n".join(line for line in GRID.splitlines() if not line.startswith("twin =")) + "\n")
+    poses, grid_twin = read_sweep_poses(grid)
+    assert grid_twin is None
+    spec = SweepSpec(poses=str(grid), cut=str(CUT), model=str(tmp_path / "model"))
+    far = [i for i in range(len(poses)) if poses.pose_id[i] == "far_away"]
+    rows = compute_chunk(spec.to_json(), poses.subset(far + [0]), grid_twin)
+    assert rows[0]["reachable"] is False and rows[0]["flags"] == "unreachable" and rows[0]["critical_depth_mm"] is None
+    assert rows[1]["reachable"] is True and rows[1]["critical_depth_mm"] > 0
+    (tmp_path / "poses.csv").write_text("pose_id,x_mm,y_mm,z_mm,beta_deg\nnear,1600,0,600,0\nfar,9000,0,800,0\n")
+    code, _, err = cli_in_process("schedule", tmp_path / "model", "--poses", tmp_path / "poses.csv", "--cut", CUT, "--json")
+    assert code == 2 and "poses the robot reaches" in err and "far" in err and "near" not in err.split("got")[-1]
+
+
 def test_sweep_bad_input_names_the_file(tmp_path):
     bad = tmp_path / "grid.toml"
     bad.write_text('[meta]\nkind = "pose_grid"\nsource = "t"\n[grid]\nx_mm = [1300, "a"]\ny_mm = [0]\nz_mm = [600]\nbeta_deg = [0]\n')

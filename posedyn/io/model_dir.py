@@ -16,6 +16,7 @@ import numpy as np
 
 from posedyn import __version__
 from posedyn.errors import InputError
+from posedyn.io.twin_file import load_twin
 from posedyn.posemodel import GP
 from posedyn.posemodel import PhysicsPrior, PoseModel
 from posedyn.posemodel import CROSS, parse_target
@@ -113,6 +114,12 @@ def save_model(model: PoseModel, folder: str | os.PathLike) -> None:
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def model_robot(model: PoseModel, twin: str | os.PathLike | None = None) -> Robot:
+    """The robot that decides which poses a model can be asked about (README, Defaults): the
+    model's own twin (physics models carry it), else the twin file `twin`, else the shipped one."""
+    return model.twin[0] if model.twin is not None else load_twin(twin)[0]
 
 
 def load_model(folder: str | os.PathLike) -> PoseModel:

@@ -7,7 +7,8 @@ import math
 
 import numpy as np
 
-from posedyn.robot.kinematics import ToolPose, abc_from_rotation, rotation_from_abc, rotation_from_beta
+from posedyn.errors import InputError
+from posedyn.robot.kinematics import Robot, ToolPose, abc_from_rotation, rotation_from_abc, rotation_from_beta
 from posedyn.table import PoseSet
 
 
@@ -34,3 +35,16 @@ def pose_set(tool_poses: list[ToolPose], beta_deg: list[float | None] | None = N
         orientation="beta" if beta else "abc",
         orientation_deg=np.array(angles, dtype=float),
     )
+
+
+def reachable_joints(robot: Robot, poses: PoseSet, index=None) -> dict:
+    """{pose index: joint angles (deg)} of the poses among `index` (all) that the robot reaches
+    (inverse kinematics within the joint limits); the others are left out."""
+    data = robot.model.createData()
+    found = {}
+    for i in range(len(poses)) if index is None else index:
+        try:
+            found[i] = np.degrees(robot.inverse(tool_pose(poses, i), data))
+        except InputError:
+            continue
+    return found

@@ -11,8 +11,9 @@ from typing import Optional
 from absorber.chain import PoseModes, twin_pose_modes
 from posedyn.errors import InputError
 from posedyn.io import read_modal_table, read_pose_table
-from posedyn.io.model_dir import load_model
+from posedyn.io.model_dir import load_model, model_robot
 from posedyn.io.twin_file import load_twin
+from posedyn.robot import reachable_joints
 from posedyn.table import PoseSet
 from posedyn.uncertainty import distributions_from_table
 
@@ -37,6 +38,11 @@ def modal_input_for(model_dir: Optional[Path], modes: Optional[Path], poses, dis
         _same_poses(pose_set, table.poses, None if isinstance(poses, PoseSet) else str(poses), str(modes))
         return table, distributions_from_table(table) if distributions else None
     model = load_model(model_dir)
+    found = reachable_joints(model_robot(model), pose_set)
+    if len(found) < len(pose_set):  # (README, Defaults: the model's twin, else the shipped one, decides)
+        far = [pose_set.pose_id[i] for i in range(len(pose_set)) if i not in found]
+        raise InputError("poses the robot reaches (the model's twin, else the shipped KR R2700 twin; no inverse kinematics for these)", got=far[:3],
+                         file=None if isinstance(poses, PoseSet) else str(poses), column="pose_id")
     warn_outside_workspace(model, pose_set)
     try:
         table = model.predict_table(pose_set)

@@ -22,12 +22,11 @@ import numpy as np
 from absorber.chain import PoseModes, ScheduleConfig, coupled, schedule_poses, table_pose_modes, twin_pose_modes
 from absorber.files import load_tuning_cache, read_absorber, read_actuator, save_tuning_cache
 from absorber.tuning import known_tunings
-from posedyn.errors import InputError
 from posedyn.io.cut import read_cut, read_sle_cut
-from posedyn.io.model_dir import load_model
+from posedyn.io.model_dir import load_model, model_robot
 from posedyn.io.twin_file import load_twin
 from posedyn.posemodel import PoseModel
-from posedyn.robot import Robot, TwinParameters, tool_pose
+from posedyn.robot import Robot, TwinParameters, reachable_joints
 from posedyn.sle import SleCut, sle_m
 from posedyn.stability import critical_lobes
 from posedyn.table import PoseSet
@@ -41,7 +40,7 @@ class SweepContext:
 
     spec: SweepSpec
     model: PoseModel | None
-    robot: Robot | None
+    robot: Robot  # decides which poses are reachable
     twin_params: TwinParameters | None
     schedule: ScheduleConfig
     sle_cut: tuple[SleCut, float] | None  # and the offset (m) the cut file adds to its SLE
@@ -58,10 +57,7 @@ def context(spec_json: str, grid_twin: str | None = None) -> SweepContext:
     model = robot = params = None
     if spec.model:
         model = load_model(spec.model)
-        if model.twin is not None:
-            robot = model.twin[0]
-        elif grid_twin:
-            robot, _ = load_twin(grid_twin)
+        robot = model_robot(model, grid_twin)  # the model's twin, else the grid's, else the shipped one
     else:
         robot, params = load_twin(spec.twin)
     return SweepContext(spec, model, robot, params, schedule, read_sle_cut(spec.cut))
@@ -77,22 +73,12 @@ def _twin_modes(ctx: SweepContext, poses: PoseSet, index: list[int]) -> dict[int
 
 
 def _model_modes(ctx: SweepContext, poses: PoseSet, index: list[int]) -> dict[int, PoseModes]:
-    reachable, joints = [], []
-    data = ctx.robot.model.createData() if ctx.robot is not None else None
-    for i in index:
-        if ctx.robot is None:
-            reachable.append(i)
-            continue
-        try:
-            joints.append(np.degrees(ctx.robot.inverse(tool_pose(poses, i), data)))
-            reachable.append(i)
-        except InputError:
-            continue
+    found = reachable_joints(ctx.robot, poses, index)
+    reachable = sorted(found)
     if not reachable:
         return {}
     subset = poses.subset(reachable)
-    if ctx.robot is not None:
-        subset = PoseSet(subset.pose_id, subset.position_mm, subset.orientation, subset.orientation_deg, np.array(joints))
+    subset = PoseSet(subset.pose_id, subset.position_mm, subset.orientation, subset.orientation_deg, np.array([found[i] for i in reachable]))
     table = ctx.model.predict_table(subset)
     distributions = ctx.model.predict_distributions(subset, table) if ctx.schedule.robust_samples else None
     return dict(zip(reachable, table_pose_modes(table, distributions)))

@@ -16,9 +16,8 @@ from absorber.field_plan import FieldPlanner
 from absorber.files import read_absorber, read_actuator, read_drive
 from posedyn.errors import InputError
 from posedyn.io.cut import read_cut
-from posedyn.io.model_dir import load_model
+from posedyn.io.model_dir import load_model, model_robot
 from posedyn.io.tool_file import read_tool
-from posedyn.io.twin_file import load_twin
 from posedyn.robot import tool_pose
 from posedyn.table import PoseSet
 from posedyn.tool_change import tool_changed_table
@@ -64,9 +63,7 @@ class ScheduleEngine:
         self.absorber = read_absorber(absorber)
         self.drive = read_drive(absorber)
         self.control = read_actuator(actuator)
-        self.robot = self.model.twin[0] if self.model.twin is not None else None
-        if self.robot is None:  # the one rule: the model's twin, else the given one, else the shipped twin
-            self.robot, _ = load_twin(twin)
+        self.robot = model_robot(self.model, twin)  # the one rule: the model's twin, else the given one, else the shipped twin
         self._lock = threading.Lock()  # Pinocchio's scratch data is not shared between threads
 
     def entry(self, pose: dict, cut: dict) -> dict:
