@@ -268,18 +268,38 @@ def matrix_modal_fit(frequency_hz, H: dict, fmin_hz=None, fmax_hz=None, max_orde
     R, std_R, fit = lsfd(frequency_hz, stack, modes, weighting)
     rel = stiffness_rel_std(modes, R, std_R)
     out = []
-    for m, r, rel_k in zip(modes, R, rel):
+    for m, r, std_r, rel_k in zip(modes, R, std_R, rel):
         wd = 2 * np.pi * m.fn_hz * math.sqrt(1 - m.zeta**2)
         A = (r * 2j * wd).real.reshape(2, 2)  # residue matrix of a real mode: phi_out phi_in^T
         u, sigma, vt = np.linalg.svd(A)
-        right, left = math.sqrt(sigma[0]) * vt[0], math.sqrt(sigma[0]) * u[:, 0]
-        if right @ left < 0:  # a direct term is positive: make both factors point the same way
-            left = -left
-        if right[np.argmax(np.abs(right))] < 0:
-            right, left = -right, -left
-        out.append({"fn_hz": m.fn_hz, "zeta": m.zeta, "shape_right": right.tolist(), "shape_left": left.tolist(),
-                    "std_fn_hz": m.std_fn_hz, "std_zeta": m.std_zeta, "rel_std_k": [float(rel_k[0]), float(rel_k[3])]})
+        # one rank-one mode, or two where x and y share the pole (an x and a y spindle mode at one
+        # frequency: the first factor alone dropped one of them, h_yy's largest peak, silently)
+        pairs = [0, 1] if _second_factor_needed((r * 2j * wd).reshape(2, 2), (std_r * 2 * wd).reshape(2, 2)) else [0]
+        for k in pairs:
+            right, left = math.sqrt(sigma[k]) * vt[k], math.sqrt(sigma[k]) * u[:, k]
+            if right @ left < 0:  # a direct term is positive: make both factors point the same way
+                left = -left
+            if right[np.argmax(np.abs(right))] < 0:
+                right, left = -right, -left
+            out.append({"fn_hz": m.fn_hz, "zeta": m.zeta, "shape_right": right.tolist(), "shape_left": left.tolist(),
+                        "std_fn_hz": m.std_fn_hz, "std_zeta": m.std_zeta, "rel_std_k": [float(rel_k[0]), float(rel_k[3])]})
     return out, {n: fit[:, i] for i, n in enumerate(names)}
+
+
+#: A pole's residue matrix holds two modes where its best complex rank-one factor leaves more
+#: than SECOND_FACTOR of a direct term (x x or y y) out, and more than SECOND_SIGMAS of that
+#: term's standard error (`matrix_modal_fit`). One mode, real or complex (non-proportional
+#: damping, whose real part alone can be rank two), has a rank-one residue up to noise; a mode
+#: seen in one direction only has a direct term of noise in the other.
+SECOND_FACTOR = 0.1
+SECOND_SIGMAS = 5.0
+
+
+def _second_factor_needed(C: np.ndarray, std_C: np.ndarray) -> bool:
+    """Whether the 2 x 2 complex residue matrix C (standard errors std_C) is more than one mode."""
+    u, sigma, vh = np.linalg.svd(C)
+    missed = np.abs(np.diag(C - sigma[0] * np.outer(u[:, 0], vh[0])))
+    return bool(np.any((missed > SECOND_FACTOR * np.abs(np.diag(C))) & (missed > SECOND_SIGMAS * np.diag(std_C))))
 
 
 def complex_modes_frf(fn_hz, zeta, left, right, omega_rad_s) -> np.ndarray:
