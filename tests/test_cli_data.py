@@ -117,3 +117,15 @@ def test_flags_and_file_keys_are_named_as_the_user_wrote_them(tmp_path, datasets
     absorber.write_text((datasets / "seeds/hou2023_mrf_absorber.toml").read_text().replace("density_kg_per_m3 = 2550.0", "density_kg_per_m3 = 0.0"))
     result = posedyn("absorber", "field", "--target-hz", 20, "--absorber", absorber)
     assert result.returncode == 2 and result.stderr.startswith(f"error: {absorber}, column 'mrf.density_kg_per_m3'")
+
+
+def test_an_unknown_missing_or_malformed_option_is_one_error_line():
+    """Click's own usage errors end as every bad input does (README, Command-line reference): one
+    line on stderr starting `error:`, naming the command's help, exit status 2 (they were a
+    multi-line usage box)."""
+    for args, words in ((("chatter", "--rpm", "abc"), "Invalid value for '--rpm'"), (("chatter", "--nope"), "No such option: --nope"),
+                        (("train",), "Missing argument"), (("nosuch",), "No such command 'nosuch'")):
+        result = posedyn(*args)
+        lines = result.stderr.strip().splitlines()
+        assert result.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: ") and words in lines[0], result.stderr
+        assert lines[0].endswith(f"(posedyn {args[0]} -h for help)" if args[0] != "nosuch" else "(posedyn -h for help)")

@@ -92,7 +92,18 @@ def main(argv: Optional[list[str]] = None) -> None:
         files.load_tuning_cache()
         known = len(tuning.known_tunings())
     try:
-        app(args=args, prog_name="posedyn")
+        code = typer.main.get_command(app).main(args=args, prog_name="posedyn", standalone_mode=False)
+        if isinstance(code, int) and code:  # a command's own exit status (typer.Exit), returned without standalone mode
+            sys.exit(code)
+    except typer.Abort:
+        print("error: aborted", file=sys.stderr)
+        sys.exit(1)
+    except typer.TyperException as exc:  # Click's usage errors (an unknown, missing or malformed option): one line, not its box
+        ctx = getattr(exc, "ctx", None)
+        where = f" ({ctx.command_path} -h for help)" if ctx is not None else ""
+        if exc.format_message():  # (none where no arguments printed the help)
+            print(f"error: {exc.format_message()}{where}", file=sys.stderr)
+        sys.exit(getattr(exc, "exit_code", 2))
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         sys.exit(2)
