@@ -38,6 +38,19 @@ def test_chatter_steps_is_an_expert_override_that_says_so(datasets):
     assert out["stable"] is True and out["spectral_radius"] < 1
 
 
+def test_steps_too_few_for_the_fastest_mode_are_warned_about(tmp_path, datasets):
+    """`--steps` that leave a 10 kHz mode under 4 steps a vibration period (60 at 2000 rpm, 3
+    teeth: 0.6) say so on stderr; enough steps for every mode (seed 004's table) say nothing."""
+    table = tmp_path / "modes.csv"
+    table.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg,direction,mode,fn_hz,zeta,k_n_per_m\n"
+                     + "".join(f"P,0,0,0,0,{d},{m},{fn},{z},{k}\n" for d in "xy" for m, fn, z, k in ((1, 3, 0.05, 3e5), (2, 10000, 0.02, 2e7))))
+    coarse = posedyn("chatter", "--modes", table, "--rpm", 2000, *CUT, "--steps", 60, "--json")
+    assert coarse.returncode == 0 and "warning: 60 steps a tooth period leave the 1e+04 Hz mode 0.6 steps per vibration period" in coarse.stderr
+    assert json.loads(coarse.stdout)["method"] == "sdm"  # (stdout stays JSON)
+    fine = posedyn("chatter", "--modes", datasets / "seeds/hou2023_positions.csv", "--pose-id", "P5", "--rpm", 2000, *CUT, "--steps", 40, "--json")
+    assert fine.returncode == 0 and "warning" not in fine.stderr
+
+
 def test_chatter_above_the_critical_depth_is_unstable(datasets):
     result = posedyn("chatter", "--modes", datasets / "seeds/hou2023_positions.csv", "--pose-id", "P5", "--rpm", 2000, *CUT, "--depth-mm", 1.0, "--json")
     out = json.loads(result.stdout)
