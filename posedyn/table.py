@@ -24,6 +24,9 @@ POSITION_COLUMNS = ("x_mm", "y_mm", "z_mm")
 ORIENTATION_COLUMNS = {"abc": ("a_deg", "b_deg", "c_deg"), "beta": ("beta_deg",)}
 JOINT_COLUMNS = tuple(f"q{j}_deg" for j in range(1, 7))
 MODAL_PARAMS = ("fn_hz", "zeta", "k_n_per_m")  # the positive parameters of a mode row
+#: A modal stiffness below this is no milling tool tip's (robots 1e5-1e7 N/m, spindles more):
+#: `ModalTable.soft_modes` names such rows (N/mm written as N/m; an accelerance fitted as a receptance).
+IMPLAUSIBLE_K_N_PER_M = 1e4
 STD_COLUMNS = tuple("std_" + name for name in MODAL_PARAMS)
 #: Optional cross-coupling: on an x row, the modal stiffness of the x response to a y force of
 #: the same mode (H_xy = 1 / (k_xy (1 - r^2 + 2 i zeta r))); on a y row, k_yx. Signed; empty
@@ -318,6 +321,12 @@ class ModalTable:
             source=None if self.source is None else tuple(self.source[i] for i in rows),
             cross={k: v[rows] for k, v in self.cross.items()},
         )
+
+    def soft_modes(self) -> list[str]:
+        """The rows whose stiffness is below IMPLAUSIBLE_K_N_PER_M (no milling tool tip is that soft:
+        N/mm read as N/m, or an accelerance read as a receptance), one line each."""
+        return [f"pose {self.poses.pose_id[self.pose_index[i]]}, {self.direction[i]} mode {self.mode[i]}: k = {self.k_n_per_m[i]:.3g} N/m, "
+                f"softer than any milling tool tip ({IMPLAUSIBLE_K_N_PER_M:.0e} N/m)" for i in np.flatnonzero(self.k_n_per_m < IMPLAUSIBLE_K_N_PER_M)]
 
     def summary(self) -> dict:
         """Counts and parameter ranges, as `posedyn data check` reports them."""

@@ -11,7 +11,7 @@ def posedyn(*args):
 def test_data_check_json_on_a_valid_file(datasets):
     result = posedyn("data", "check", datasets / "seeds/swan_spindle_robot.csv", "--json")
     assert result.returncode == 0, result.stderr
-    assert json.loads(result.stdout) == {"rows": 37, "poses": 1, "directions": ["x", "y"], "modes": {"x": 20, "y": 17}}
+    assert json.loads(result.stdout) == {"rows": 37, "poses": 1, "directions": ["x", "y"], "modes": {"x": 20, "y": 17}, "warnings": []}
 
 
 def test_data_check_human_output(datasets):
@@ -129,3 +129,15 @@ def test_an_unknown_missing_or_malformed_option_is_one_error_line():
         lines = result.stderr.strip().splitlines()
         assert result.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: ") and words in lines[0], result.stderr
         assert lines[0].endswith(f"(posedyn {args[0]} -h for help)" if args[0] != "nosuch" else "(posedyn -h for help)")
+
+
+def test_a_stiffness_no_tool_tip_has_is_warned_about_where_a_table_is_read(tmp_path):
+    """k = 1060 N/m (N/mm written as N/m) was accepted by `data check` and `chatter` without the
+    warning `fit` gives (below 1e4 N/m): now both say it, on stderr (and in data check's JSON)."""
+    table = tmp_path / "soft.csv"
+    table.write_text("pose_id,x_mm,y_mm,z_mm,beta_deg,direction,mode,fn_hz,zeta,k_n_per_m\nP,0,0,0,0,x,1,20,0.03,1060\nP,0,0,0,0,y,1,20,0.03,2e6\n")
+    checked = posedyn("data", "check", table, "--json")
+    assert checked.returncode == 0 and "x mode 1: k = 1.06e+03 N/m" in checked.stderr
+    assert json.loads(checked.stdout)["warnings"] == [line[len("warning: "):] for line in checked.stderr.strip().splitlines()]
+    chatter = posedyn("chatter", "--modes", table, "--rpm", 2000, "--teeth", 3, "--kt-mpa", 796, "--kn-mpa", 169, "--radial-immersion", 0.5, "--json")
+    assert chatter.returncode == 0 and "x mode 1: k = 1.06e+03 N/m" in chatter.stderr and "y mode" not in chatter.stderr

@@ -47,12 +47,16 @@ def _modal_summary_table(title: str, summaries: dict[str, dict]) -> Table:
 @app.command("check")
 def data_check(
     file: Path = typer.Argument(..., help="Modal-test table (CSV)."),
-    as_json: bool = typer.Option(False, "--json", help="Print {rows, poses, directions, modes} as JSON."),
+    as_json: bool = typer.Option(False, "--json", help="Print {rows, poses, directions, modes, warnings} as JSON."),
 ):
     """Validate a modal-test table and summarise it. Exit 0 when valid, 2 when not."""
-    summary = read_modal_table(file).summary()
+    table = read_modal_table(file)
+    summary = table.summary()
+    warnings = [f"{file}: {line}: is the unit N/m (not N/mm)?" for line in table.soft_modes()]
+    for line in warnings:
+        print(f"warning: {line}", file=sys.stderr)
     if as_json:
-        print_json({k: summary[k] for k in ("rows", "poses", "directions", "modes")})
+        print_json({**{k: summary[k] for k in ("rows", "poses", "directions", "modes")}, "warnings": warnings})
     else:
         out.print(_modal_summary_table("valid modal-test table", {str(file): summary}))
 
