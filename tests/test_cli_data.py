@@ -141,3 +141,9 @@ def test_a_stiffness_no_tool_tip_has_is_warned_about_where_a_table_is_read(tmp_p
     assert json.loads(checked.stdout)["warnings"] == [line[len("warning: "):] for line in checked.stderr.strip().splitlines()]
     chatter = posedyn("chatter", "--modes", table, "--rpm", 2000, "--teeth", 3, "--kt-mpa", 796, "--kn-mpa", 169, "--radial-immersion", 0.5, "--json")
     assert chatter.returncode == 0 and "x mode 1: k = 1.06e+03 N/m" in chatter.stderr and "y mode" not in chatter.stderr
+
+
+def test_a_file_of_another_kind_given_as_the_modal_table_is_named_as_such(datasets):
+    """A cut file given to `data check` was refused for its first comment line as a column name."""
+    result = posedyn("data", "check", datasets / "seeds/hou2023_cut.toml")
+    assert result.returncode == 2 and "expected a modal-test table (CSV" in result.stderr and "a .toml file (a cut" in result.stderr

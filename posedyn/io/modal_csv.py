@@ -59,11 +59,20 @@ CONSISTENCY_RTOL = 0.01
 def read_modal_table(path: str | os.PathLike) -> ModalTable:
     """Load and validate a modal-test CSV file."""
     path = Path(path)
+    kind = OTHER_KINDS.get(path.suffix.lower())
+    if kind is not None:  # (a cut file given as the table was refused for its first comment line as a column name)
+        raise InputError("a modal-test table (CSV; see README: modal-test table)", got=f"a {path.suffix} file ({kind})", file=str(path))
     try:
         data = path.read_bytes()
     except OSError as exc:
         raise InputError("a readable file", got=exc.strerror, file=str(path)) from None
     return parse_modal_table(data, name=str(path))
+
+
+#: File kinds that are never a modal table, by suffix: what they are in this project.
+OTHER_KINDS = {".toml": "a cut, grid, twin, absorber or parameter file", ".uff": "FRFs: `posedyn fit` makes a table of them",
+               ".unv": "FRFs: `posedyn fit` makes a table of them", ".json": "JSON", ".npz": "arrays", ".parquet": "a sweep's results",
+               ".html": "a report", ".png": "a plot"}
 
 
 def parse_modal_table(data: bytes | str, name: str = "<table>") -> ModalTable:
