@@ -26,9 +26,9 @@ demo: $(STAMP)
 	printf 'pose_id,x_mm,y_mm,z_mm,beta_deg\nnear,1400,-200,600,-30\nfar,1850,250,600,50\n' > build/demo/poses.csv
 	$(BIN)/posedyn predict build/demo/model --poses build/demo/poses.csv --out build/demo/predicted.csv
 	@echo
-	@echo "Absorber schedule (seed 004's MRF absorber and cut) at seed 004's positions 3, 5 and 7 and at x = 1000 mm,"
+	@echo "Absorber schedule (seed 004's MRF absorber and cut) at seed 004's positions 3, 5 and 7 and at x = 2000 mm,"
 	@echo "with the depths the model's uncertainty guarantees and the robust field"
-	printf 'pose_id,x_mm,y_mm,z_mm,beta_deg\nP3,1600,0,800,0\nP5,1400,0,800,0\nP7,1200,0,800,0\nx1000,1000,0,800,0\n' > build/demo/hou2023_poses.csv
+	printf 'pose_id,x_mm,y_mm,z_mm,beta_deg\nP3,1600,0,800,0\nP5,1400,0,800,0\nP7,1200,0,800,0\nx2000,2000,0,800,0\n' > build/demo/hou2023_poses.csv
 	$(BIN)/posedyn train datasets/seeds/hou2023_positions.csv --cv 0 --cut datasets/seeds/hou2023_cut.toml --out build/demo/hou2023_model
 	$(BIN)/posedyn schedule build/demo/hou2023_model --poses build/demo/hou2023_poses.csv \
 		--cut datasets/seeds/hou2023_cut.toml --policy match --robust --out build/demo/schedule.json
