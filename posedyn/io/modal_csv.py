@@ -31,6 +31,8 @@ from posedyn.table import (
     CROSS_COLUMNS,
     DIRECTIONS,
     JOINT_COLUMNS,
+    MAX_FN_HZ,
+    MAX_K_N_PER_M,
     ORIENTATION_COLUMNS,
     POSITION_COLUMNS,
     STD_COLUMNS,
@@ -282,8 +284,8 @@ class _Parser:
                 )
             seen_keys[key] = number
             fn = self._number(cells, "fn_hz", at)
-            if fn <= 0:
-                raise InputError("a number > 0", got=cells["fn_hz"], column="fn_hz", **at)
+            if not 0 < fn <= MAX_FN_HZ:
+                raise InputError("a number > 0" if fn <= 0 else f"a number in (0, {MAX_FN_HZ:.0e}] Hz", got=cells["fn_hz"], column="fn_hz", **at)
             zeta, k = self._damping_and_stiffness(cells, dynamic, fn, at)
             out["pose_index"].append(pose_ids.index(pose_id))
             out["direction"].append(direction)
@@ -358,6 +360,8 @@ class _Parser:
             zeta = v["zeta"]
         elif "c_ns_per_m" in v:
             zeta = v["c_ns_per_m"] * wn / (2.0 * k)
+        if not k <= MAX_K_N_PER_M:
+            raise InputError(f"a stiffness in (0, {MAX_K_N_PER_M:.0e}] N/m", got=cells["k_n_per_m"] if "k_n_per_m" in v else k, column="k_n_per_m" if "k_n_per_m" in v else dynamic[-1], **at)
         if not 0 < zeta < 1:
             used = ", ".join(["fn_hz"] + dynamic)
             raise InputError(f"damping ratio in (0, 1) derived from {used}", got=round(zeta, 6), column="c_ns_per_m", **at)
