@@ -32,7 +32,6 @@ from posedyn.table import (
     DIRECTIONS,
     JOINT_COLUMNS,
     MAX_FN_HZ,
-    MAX_K_N_PER_M,
     ORIENTATION_COLUMNS,
     POSITION_COLUMNS,
     STD_COLUMNS,
@@ -360,8 +359,6 @@ class _Parser:
             zeta = v["zeta"]
         elif "c_ns_per_m" in v:
             zeta = v["c_ns_per_m"] * wn / (2.0 * k)
-        if not k <= MAX_K_N_PER_M:
-            raise InputError(f"a stiffness in (0, {MAX_K_N_PER_M:.0e}] N/m", got=cells["k_n_per_m"] if "k_n_per_m" in v else k, column="k_n_per_m" if "k_n_per_m" in v else dynamic[-1], **at)
         if not 0 < zeta < 1:
             used = ", ".join(["fn_hz"] + dynamic)
             raise InputError(f"damping ratio in (0, 1) derived from {used}", got=round(zeta, 6), column="c_ns_per_m", **at)
