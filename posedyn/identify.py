@@ -270,11 +270,11 @@ def matrix_modal_fit(frequency_hz, H: dict, fmin_hz=None, fmax_hz=None, max_orde
     out = []
     for m, r, std_r, rel_k in zip(modes, R, std_R, rel):
         wd = 2 * np.pi * m.fn_hz * math.sqrt(1 - m.zeta**2)
-        A = (r * 2j * wd).real.reshape(2, 2)  # residue matrix of a real mode: phi_out phi_in^T
-        u, sigma, vt = np.linalg.svd(A)
+        C = (r * 2j * wd).reshape(2, 2)  # the pole's residue matrix; of a real mode phi_out phi_in^T
+        u, sigma, vt = np.linalg.svd(C.real)
         # one rank-one mode, or two where x and y share the pole (an x and a y spindle mode at one
         # frequency: the first factor alone dropped one of them, h_yy's largest peak, silently)
-        pairs = [0, 1] if _second_factor_needed((r * 2j * wd).reshape(2, 2), (std_r * 2 * wd).reshape(2, 2)) else [0]
+        pairs = [0, 1] if _second_factor_needed(C, (std_r * 2 * wd).reshape(2, 2)) else [0]
         for k in pairs:
             right, left = math.sqrt(sigma[k]) * vt[k], math.sqrt(sigma[k]) * u[:, k]
             if right @ left < 0:  # a direct term is positive: make both factors point the same way

@@ -252,7 +252,7 @@ def read_frf_uff(path: str | os.PathLike) -> FRFSet:
         raise InputError("at least one dataset 58 with function type 4 (FRF)", got="none", file=name)
     by_type = {v: k for k, v in UFF_ORDINATE.items()}
     f = np.asarray(sets[0]["x"], dtype=float)
-    frf, pose, pose_id, seen = {}, {}, path.stem, {}
+    frf, first = {}, {}  # first: id2 key -> (the dataset that gave it first, its value)
     for k, s in enumerate(sets, 1):
         quantity = by_type.get(int(s.get("ordinate_spec_data_type", 8)))
         if quantity is None:
@@ -287,15 +287,11 @@ def read_frf_uff(path: str | os.PathLike) -> FRFSet:
                 raise InputError("each id2 key once", got=f"{k_} twice", file=name, row=k, column=f"id2 {k_}")
             given[k_] = v.strip() if k_ == "pose_id" else _pose_value(v, file=name, row=k, column=f"id2 {k_}")
         for k_, v in given.items():  # the datasets of one file are one pose
-            known = pose_id if k_ == "pose_id" else pose.get(k_)
-            if k > 1 and k_ in seen and known != v:
-                raise InputError(f"the same {k_} in every dataset (dataset {seen[k_]}: {known})", got=v, file=name, row=k, column=f"id2 {k_}")
-            seen.setdefault(k_, k)
-            if k_ == "pose_id":
-                pose_id = v
-            else:
-                pose[k_] = v
-    return FRFSet(frequency_hz=f, frf=frf, pose_id=pose_id, pose=pose, source=name)
+            if k_ in first and first[k_][1] != v:
+                raise InputError(f"the same {k_} in every dataset (dataset {first[k_][0]}: {first[k_][1]})", got=v, file=name, row=k, column=f"id2 {k_}")
+            first.setdefault(k_, (k, v))
+    pose = {k_: v for k_, (_, v) in first.items() if k_ != "pose_id"}
+    return FRFSet(frequency_hz=f, frf=frf, pose_id=first.get("pose_id", (0, path.stem))[1], pose=pose, source=name)
 
 
 def read_frf(path: str | os.PathLike) -> FRFSet:

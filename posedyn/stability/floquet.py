@@ -2602,11 +2602,10 @@ def _finish_all(char, dyns, keeps, jobs, cut, rpm, tau_all, cands, base, rel_tol
             # (a job counted here only: more crossings up to rel_tol above than its points bring is
             # a branch the search missed, as at the first refined level)
             missed[j] = not (count == 0 and resolved and rung is None) or (count_above is not None and count_above > _crossings(et[mine][ea[mine] <= above]))
-            if deferred[j]:
-                if missed[j] and hinted[j]:
-                    retry[j], missed[j] = True, False
-                verified[j] = not missed[j]
-                if ladder is not None and not missed[j]:
+            if deferred[j]:  # (hinted: where the count is not 0, solved again from the seeds)
+                retry[j], missed[j] = missed[j], False
+                verified[j] = not retry[j]
+                if ladder is not None and not retry[j]:
                     ladders[j] = (lv,) + ladder
     # chatter frequencies, batched per (structure, resolution)
     wanted: dict = {}
