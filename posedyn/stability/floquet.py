@@ -1319,8 +1319,8 @@ def segment_interpolants(E: np.ndarray, m: int):
     coef = np.empty((len(E), m // 2) + E.shape[2:], dtype=complex)
     size = np.empty((len(E), m))
     for lo, hi in _blocks(len(E), m * E[0, 0].nbytes):
-        with np.errstate(all="ignore"):
-            block = np.fft.ifft(np.concatenate([E[lo:hi], np.conj(E[lo:hi, 1 : m // 2][:, ::-1])], axis=1), axis=1)
+        with np.errstate(all="ignore"):  # real coefficients (E(conj nu) = conj E(nu)): the inverse of a real signal's spectrum
+            block = np.fft.irfft(E[lo:hi], n=m, axis=1)
         size[lo:hi] = np.abs(block).max(axis=(2, 3))
         coef[lo:hi] = block[:, : m // 2]
     tail = size[:, m // 2 :].sum(axis=1)
@@ -1383,8 +1383,8 @@ def monodromy_polynomial(half: np.ndarray, N: int):
     interpolant's error: 2n x twice the upper half, which is all that aliasing and truncation
     leave out; inf where that half is not below INTERP_TOL of the largest coefficient or not
     finite)."""
-    with np.errstate(all="ignore"):
-        coef = np.fft.ifft(np.concatenate([half, np.conj(half[1 : N // 2][::-1])]), axis=0)
+    with np.errstate(all="ignore"):  # real coefficients, as in `segment_interpolants`
+        coef = np.fft.irfft(half, n=N, axis=0)
     size = np.abs(coef).max(axis=(1, 2))
     tail = size[N // 2 :].sum()
     good = np.all(np.isfinite(size)) and tail <= INTERP_TOL * size.max()
