@@ -89,9 +89,9 @@ def test_sle_cli_contract(datasets):
         assert result.returncode == 0, result.stderr
         return json.loads(result.stdout)
 
-    assert set(run("--rpm", 10700)) == {"sle_um"}
+    assert set(run("--rpm", 10700)) == {"sle_um", "stability_checked", "note"}  # (not checked for chatter: says so)
     sweep = run("--rpm-min", 10000, "--rpm-max", 11000, "--rpm-steps", 5)
-    assert set(sweep) == {"rpm", "sle_um"} and len(sweep["sle_um"]) == 5
+    assert set(sweep) == {"rpm", "sle_um", "stability_checked", "note"} and len(sweep["sle_um"]) == 5
     steps = run("compensate", "--rpm", 10700, "--tolerance-um", 2)["iterations"]
     assert set(steps[0]) == {"radial_depth_mm", "sle_um", "part_error_um"} and abs(steps[-1]["part_error_um"]) < 2
 
@@ -180,6 +180,8 @@ def test_sle_says_when_the_cut_chatters(tmp_path):
     assert "CHATTERS" in run_cli(*args, "--axial-depth-mm", "5", "--stability").stdout
     assert json.loads(run_cli(*args, "--axial-depth-mm", "0.3", "--stability", "--json").stdout)["stable"] is True
     assert "stable cut" in run_cli(*args, "--axial-depth-mm", "5").stdout
+    unchecked = json.loads(run_cli(*args, "--axial-depth-mm", "5", "--json").stdout)  # the JSON says so too (it said nothing)
+    assert unchecked["stability_checked"] is False and "--stability" in unchecked["note"] and "stable" not in unchecked
     ranged = [a for a in args if a not in ("--rpm", "600")] + ["--rpm-min", "600", "--rpm-max", "610", "--rpm-steps", "2", "--axial-depth-mm", "5", "--stability"]
     out = json.loads(run_cli(*ranged, "--json").stdout)  # per speed as at one speed (the critical depths were left out)
     assert out["stable"] == [False, False] and out["critical_depth_mm"][0] == pytest.approx(0.4263, rel=0.02)

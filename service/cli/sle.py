@@ -106,7 +106,7 @@ def sle(
     if rpm is not None:
         with flag_errors(SLE_FLAGS):
             value = float(sle_m(dyn, cut, rpm, slices, offset_m=offset)[0])
-        out = {"sle_um": value * 1e6}
+        out = {"sle_um": value * 1e6, **_stability_note(stability)}
         if stability:
             critical = float(_stability(dyn, cut, np.array([rpm]))[0])
             out.update(critical_depth_mm=finite_or_none(critical * 1e3), stable=bool(cut.axial_depth_m < critical))
@@ -115,14 +115,14 @@ def sle(
             return
         console.print(f"SLE {value * 1e6:.3f} um ({'undercut' if value > 0 else 'overcut'}) at {rpm:g} rpm")
         if not stability:
-            console.print("  (the SLE of a stable cut: --stability checks that the cut does not chatter)")
+            console.print(f"  ({UNCHECKED})")
         elif not out["stable"]:
             console.print(f"  the cut CHATTERS: axial depth {cut.axial_depth_m * 1e3:g} mm is above the critical depth {critical * 1e3:.4g} mm; the SLE of a stable cut does not apply")
         return
     speeds = np.linspace(rpm_min, rpm_max, rpm_steps)
     with flag_errors(SLE_FLAGS):
         values = sle_m(dyn, cut, speeds, slices, offset_m=offset)
-    out = {"rpm": speeds.tolist(), "sle_um": (values * 1e6).tolist()}
+    out = {"rpm": speeds.tolist(), "sle_um": (values * 1e6).tolist(), **_stability_note(stability)}
     if stability:
         critical = _stability(dyn, cut, speeds)
         stable = cut.axial_depth_m < critical
@@ -135,6 +135,15 @@ def sle(
     if len(counted):
         console.print(f"SLE from {counted.min() * 1e6:.2f} to {counted.max() * 1e6:.2f} um over {rpm_min:g}-{rpm_max:g} rpm" + (" (stable speeds)" if stability else ""))
     if not stability:
-        console.print("  (the SLE of a stable cut: --stability checks that the cut does not chatter)")
+        console.print(f"  ({UNCHECKED})")
     elif not stable.all():
         console.print(f"  the cut CHATTERS at {int((~stable).sum())} of {len(speeds)} speeds (axial depth above the critical depth): their SLE does not apply (--json: 'stable')")
+
+
+UNCHECKED = "the SLE of a stable cut: --stability checks that the cut does not chatter"
+
+
+def _stability_note(checked: bool) -> dict:
+    """Whether the JSON's SLE was checked for chatter; where not, the same hint as the text (a
+    cut above its critical depth has no SLE, and without --stability nothing says so)."""
+    return {"stability_checked": True} if checked else {"stability_checked": False, "note": UNCHECKED}
