@@ -73,6 +73,12 @@ def flag_errors(extra: dict | None = None):
         raise exc.renamed(FLAGS | (extra or {})) from None
 
 
+def soft_mode_warnings(table, file) -> list[str]:
+    """`ModalTable.soft_modes` as warnings on `file` (N/mm written as N/m makes every depth 1000
+    times too small): what `data check` and the stability commands print."""
+    return [f"{file}: {line}: is the unit N/m (not N/mm)?" for line in table.soft_modes()]
+
+
 def finite_or_none(value: float):
     """JSON has no inf or NaN: a depth that never chatters is null."""
     return float(value) if math.isfinite(value) else None

@@ -13,7 +13,7 @@ from posedyn.errors import InputError
 from posedyn.io import flatten, read_modal_table, read_params
 from posedyn.io.measurements import read_measurements
 from posedyn.io.shipped import DATASETS
-from service.cli.common import console, print_json
+from service.cli.common import console, print_json, soft_mode_warnings
 
 app = typer.Typer(help="Validate and summarise modal-test tables and parameter files.", no_args_is_help=True)
 out = console
@@ -52,7 +52,7 @@ def data_check(
     """Validate a modal-test table and summarise it. Exit 0 when valid, 2 when not."""
     table = read_modal_table(file)
     summary = table.summary()
-    warnings = [f"{file}: {line}: is the unit N/m (not N/mm)?" for line in table.soft_modes()]
+    warnings = soft_mode_warnings(table, file)
     for line in warnings:
         print(f"warning: {line}", file=sys.stderr)
     if as_json:

@@ -22,12 +22,20 @@ from service.cli.common import Milling, console, finite_or_none, flag_errors, pr
 SLE_FLAGS = {"offset_m": ("--offset-um", 1e6), "tolerance_m": ("--tolerance-um", 1e6), "rpm": ("--rpm", None), "slices": ("--axial-slices", None)}
 
 
+UNCHECKED = "the SLE of a stable cut: --stability checks that the cut does not chatter"
+
+
+def _stability_note(checked: bool) -> dict:
+    """Whether the JSON's SLE was checked for chatter; where not, the same hint as the text (a
+    cut above its critical depth has no SLE, and without --stability nothing says so)."""
+    return {"stability_checked": True} if checked else {"stability_checked": False, "note": UNCHECKED}
+
+
 def _stability(dyn: ToolTipDynamics, cut: SleCut, rpm: np.ndarray) -> np.ndarray:
     """Critical depth (m) of the SLE's cut at each speed (converged engine, straight flutes):
     the SLE is the error of a stable cut; above that depth the cut chatters and it means nothing."""
     stability_cut = Cut(teeth=cut.teeth, kt_pa=cut.kt_pa, kn_pa=cut.kn_pa, radial_immersion=min(1.0, cut.radial_depth_m / cut.tool_diameter_m), milling=cut.milling)
     return np.array([r.depth_m for r in critical_lobes(dyn, stability_cut, rpm, workers=2)])
-
 
 
 def _inputs(modes, extra, pose_id, teeth, kt_mpa, kn_mpa, tool_diameter_mm, helix_deg, radial_depth_mm, axial_depth_mm, feed_per_tooth_mm, milling, direction):
@@ -138,12 +146,3 @@ def sle(
         console.print(f"  ({UNCHECKED})")
     elif not stable.all():
         console.print(f"  the cut CHATTERS at {int((~stable).sum())} of {len(speeds)} speeds (axial depth above the critical depth): their SLE does not apply (--json: 'stable')")
-
-
-UNCHECKED = "the SLE of a stable cut: --stability checks that the cut does not chatter"
-
-
-def _stability_note(checked: bool) -> dict:
-    """Whether the JSON's SLE was checked for chatter; where not, the same hint as the text (a
-    cut above its critical depth has no SLE, and without --stability nothing says so)."""
-    return {"stability_checked": True} if checked else {"stability_checked": False, "note": UNCHECKED}

@@ -24,7 +24,7 @@ from posedyn.stability import (
     modes_carrying_over, zoa,
 )
 from posedyn.stability.cutting import check_rpm
-from service.cli.common import Milling, console, finite_or_none, flag_errors, output_file, print_json
+from service.cli.common import Milling, console, finite_or_none, flag_errors, output_file, print_json, soft_mode_warnings
 
 
 class Method(str, Enum):
@@ -56,9 +56,8 @@ def _setup(modes: Path, pose_id, teeth, kt_mpa, kn_mpa, radial_immersion, millin
         dyn = ToolTipDynamics.from_table(table, pose_id)
     except InputError as exc:
         raise exc.located(file=str(modes)) from None
-    chosen = table.select_poses([table.poses.index(pose_id)]) if pose_id is not None else table.select_poses([0])
-    for line in chosen.soft_modes():  # (as `data check`: N/mm written as N/m makes every depth 1000 times too small)
-        print(f"warning: {modes}: {line}: is the unit N/m (not N/mm)?", file=sys.stderr)
+    for line in soft_mode_warnings(table.select_poses([table.poses.index(pose_id) if pose_id is not None else 0]), modes):  # (as `data check`)
+        print(f"warning: {line}", file=sys.stderr)
     with flag_errors():
         cut = Cut(
             teeth=teeth,
