@@ -236,9 +236,10 @@ class DVF:
         be an array of gains."""
         omega = 2 * math.pi * np.geomspace(0.5, fmax_hz, 1500)
         unit = 1j * omega * self._path_frf(omega) * self.h22(1j * omega)
-        gains = np.atleast_1d(np.asarray(gain_ns_per_m, dtype=float))
-        loop = gains[:, None] * unit[None, :]
-        out = np.max(np.abs(loop / (1 + loop)), axis=1) * disturbance_n
+        gains = np.atleast_1d(np.asarray(gain_ns_per_m, dtype=float))[:, None]
+        # |K U / (1 + K U)|^2 = K^2 |U|^2 / (1 + 2 K Re U + K^2 |U|^2): real arrays over gains x frequencies
+        loop2 = gains**2 * (unit.real**2 + unit.imag**2)[None, :]
+        out = np.sqrt(np.max(loop2 / (1.0 + 2.0 * gains * unit.real[None, :] + loop2), axis=1)) * disturbance_n
         return float(out[0]) if np.ndim(gain_ns_per_m) == 0 else out
 
 

@@ -27,6 +27,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
+from blas_kernel import describe
 
 from posedyn.io.shipped import DATASETS
 from posedyn.dynamics import ToolTipDynamics
@@ -159,6 +160,7 @@ def main() -> None:
     args = parser.parse_args()
     kept = False if args.default_heap else keep_freed_memory()
     print(f"heap: {'freed memory kept, as in the CLI and the sweep workers (service.heap)' if kept else 'glibc defaults'}")
+    print(f"BLAS: {describe()}")
     if not args.only_multiscale:
         bench_map(args.immersion, args.baseline_points)
         bench_pose()

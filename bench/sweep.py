@@ -4,7 +4,9 @@ with the default settings, and the speedup from 1 to 2 workers on about 2,000 po
 has 625 positions times a whole number of angles: --poses 2000 gives 1,875).
 
 Target (issue 17, converged stability with and without the absorber): 10,000 poses <= 300 s on
-2 cores (issue 9's 120 s was with 20 semi-discretization steps). Prints figures only.
+2 cores (issue 9's 120 s was with 20 semi-discretization steps). Prints figures only, and the
+BLAS kernel they ran on (`blas_kernel`: the machine's OPENBLAS_CORETYPE, or the CPU's own with
+`env -u OPENBLAS_CORETYPE -u OPENBLAS_L2_SIZE` before the command).
 
     .venv/bin/python bench/sweep.py [--poses 10000] [--speedup-poses 2000]
 """
@@ -16,6 +18,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from blas_kernel import describe
 
 from posedyn.io.shipped import DATASETS
 from service.sweep import SweepSpec
@@ -56,6 +59,7 @@ def main() -> None:
     parser.add_argument("--poses", type=int, default=10_000)
     parser.add_argument("--speedup-poses", type=int, default=2_000)
     args = parser.parse_args()
+    print(f"BLAS: {describe()}")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         print(f"sweep of about {args.poses} poses, default settings, 2 local workers (target <= 300 s for 10,000):")
