@@ -3,6 +3,7 @@ columns (A/B/C or seed 003's beta) to the tool pose the robot model takes, and b
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -48,3 +49,12 @@ def reachable_joints(robot: Robot, poses: PoseSet, index=None) -> dict:
         except InputError:
             continue
     return found
+
+
+def with_joints(poses: PoseSet, found: dict) -> PoseSet:
+    """`poses` with the joint angles that `reachable_joints` found for every one of them ({pose
+    index: deg}), or as they are where they carry joint columns (`pose_joints` takes those
+    first): a model's prediction then does not solve the same inverse kinematics again."""
+    if poses.joints_deg is not None:
+        return poses
+    return dataclasses.replace(poses, joints_deg=np.array([found[i] for i in range(len(poses))]))

@@ -13,7 +13,7 @@ from posedyn.errors import InputError
 from posedyn.io import read_modal_table, read_pose_table
 from posedyn.io.model_dir import load_model, model_robot
 from posedyn.io.twin_file import load_twin
-from posedyn.robot import reachable_joints
+from posedyn.robot import reachable_joints, with_joints
 from posedyn.table import PoseSet
 from posedyn.uncertainty import distributions_from_table
 
@@ -44,6 +44,7 @@ def modal_input_for(model_dir: Optional[Path], modes: Optional[Path], poses, dis
         raise InputError("poses the robot reaches (the model's twin, else the shipped KR R2700 twin; no inverse kinematics for these)", got=far[:3],
                          file=None if isinstance(poses, PoseSet) else str(poses), column="pose_id")
     warn_outside_workspace(model, pose_set)
+    pose_set = with_joints(pose_set, found)  # (a physics prior's inverse kinematics once, here)
     try:
         table = model.predict_table(pose_set)
     except InputError as exc:

@@ -26,7 +26,7 @@ from posedyn.io.cut import read_cut, read_sle_cut
 from posedyn.io.model_dir import load_model, model_robot
 from posedyn.io.twin_file import load_twin
 from posedyn.posemodel import PoseModel
-from posedyn.robot import Robot, TwinParameters, reachable_joints
+from posedyn.robot import Robot, TwinParameters, reachable_joints, with_joints
 from posedyn.sle import SleCut, sle_m
 from posedyn.stability import critical_lobes
 from posedyn.table import PoseSet
@@ -77,8 +77,7 @@ def _model_modes(ctx: SweepContext, poses: PoseSet, index: list[int]) -> dict[in
     reachable = sorted(found)
     if not reachable:
         return {}
-    subset = poses.subset(reachable)
-    subset = PoseSet(subset.pose_id, subset.position_mm, subset.orientation, subset.orientation_deg, np.array([found[i] for i in reachable]))
+    subset = with_joints(poses.subset(reachable), {k: found[i] for k, i in enumerate(reachable)})
     table = ctx.model.predict_table(subset)
     distributions = ctx.model.predict_distributions(subset, table) if ctx.schedule.robust_samples else None
     return dict(zip(reachable, table_pose_modes(table, distributions)))
