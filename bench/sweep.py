@@ -67,8 +67,8 @@ def main() -> None:
         print(f"  ratio to the 300 s target, scaled to 10,000 poses: {per_pose * 10_000 / 300:.2f}")
         print(f"speedup on about {args.speedup_poses} poses (same run, same machine):")
         small = grid_file(tmp, args.speedup_poses)
-        # at least 16 chunks, so that two workers can share them evenly (625 poses in the default
-        # 250 a chunk are 3; measured 2026-12-05: 1.58x either way, a run's fixed costs decide)
+        # at least 16 chunks, so that two workers can share them evenly (625 poses in chunks of 250
+        # are 3, of the default 500 two; measured 2026-12-05: 1.58x either way, a run's fixed costs decide)
         chunk = max(1, args.speedup_poses // 16)
         one = run(small, tmp / "one", 1, chunk)
         two = run(small, tmp / "two", 2, chunk)

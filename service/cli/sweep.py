@@ -18,6 +18,7 @@ from posedyn.io.cut import read_cut
 from service import html
 from service.cli.common import console, resolve_cut
 from service.sweep import SweepSpec, run_sweep, write_report
+from service.sweep.spec import DEFAULT_CHUNK_SIZE
 
 
 def sweep(
@@ -33,7 +34,7 @@ def sweep(
     resume: bool = typer.Option(False, "--resume", help="Keep the chunks already in --out and compute only the missing ones."),
     policy: str = typer.Option("match", "--policy", help="Absorber target: match (dominant chatter), sims (max-min Re G; slow) or depth (the largest critical depth; slow)."),
     steps: Optional[int] = typer.Option(None, "--steps", min=4, help="Expert override: semi-discretization steps per delay instead of the converged engine (error not estimated)."),
-    chunk_size: int = typer.Option(250, "--chunk-size", min=1, help="Poses per chunk (the unit of work, of writing and of resuming)."),
+    chunk_size: int = typer.Option(DEFAULT_CHUNK_SIZE, "--chunk-size", min=1, help="Poses per chunk (the unit of work, of writing and of resuming)."),
     robust_samples: int = typer.Option(0, "--robust-samples", min=0, max=2000, help="> 0 (8 or more): the guaranteed depths (95 % lower bounds) over that many samples of each pose's modes, and the robust absorber setting; seconds per pose. Needs a model."),
     lobes: bool = typer.Option(True, "--lobes/--no-lobes", help="Stability lobes at three representative poses in the report."),
     lobe_speeds: int = typer.Option(40, "--lobe-speeds", min=2, max=2000, help="Speeds of each report lobe (0.5-1.5 x the cut's speed); each is a verified solve without and with the absorber."),
