@@ -8,6 +8,13 @@ Target (issue 17, converged stability with and without the absorber): 10,000 pos
 BLAS kernel they ran on (`blas_kernel`: the machine's OPENBLAS_CORETYPE, or the CPU's own with
 `env -u OPENBLAS_CORETYPE -u OPENBLAS_L2_SIZE` before the command).
 
+Beside it, in the same run (the hosts here differ by 2x from one day to the next, so the ratio
+is the figure to compare): the first-order semi-discretization at the 640 steps it needs to come
+within 2 % on this cut (`bench/stability.py` (e)), on the bare structure of the first sweep pose
+that chatters at a spindle mode (above 1 kHz), with its spindle modes alone, scaled to 10,000
+poses x 2 structures on 2 workers. It flatters the semi-discretization (no robot modes, no
+absorber: with all modes one structure takes minutes); its depth is printed beside the sweep's.
+
     .venv/bin/python bench/sweep.py [--poses 10000] [--speedup-poses 2000]
 """
 
@@ -15,14 +22,23 @@ from __future__ import annotations
 
 import argparse
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
 from blas_kernel import describe
 
+from posedyn.dynamics import ToolTipDynamics
+from posedyn.io.cut import read_cut
 from posedyn.io.shipped import DATASETS
+from posedyn.stability import Discretization, StabilityModel
 from service.sweep import SweepSpec
+from service.sweep.chunk import context, pose_modes_of
 from service.sweep.runner import run_sweep
+from service.sweep.spec import read_sweep_poses
+
+CUT = DATASETS / "cuts/sweep_demo_cut.toml"
+TWIN = DATASETS / "robots/kr_r2700_twin.toml"
 
 
 def grid_file(folder: Path, poses: int) -> Path:
@@ -41,17 +57,41 @@ def grid_file(folder: Path, poses: int) -> Path:
     return path
 
 
-def run(grid: Path, out: Path, workers: int, chunk_size: int | None = None) -> float:
+def run(grid: Path, out: Path, workers: int, chunk_size: int | None = None):
     spec = SweepSpec(
         poses=str(grid),
-        cut=str(DATASETS / "cuts/sweep_demo_cut.toml"),
-        twin=str(DATASETS / "robots/kr_r2700_twin.toml"),
+        cut=str(CUT),
+        twin=str(TWIN),
         **({} if chunk_size is None else {"chunk_size": chunk_size}),
     )
     outcome = run_sweep(spec, out, workers=workers)
     reachable = sum(1 for r in outcome.rows if r["reachable"])
     print(f"  {len(outcome.rows)} poses ({reachable} reachable), {workers} worker(s): {outcome.seconds:.1f} s ({outcome.seconds / len(outcome.rows) * 1e3:.1f} ms per pose)")
-    return outcome.seconds / len(outcome.rows)
+    return outcome.seconds / len(outcome.rows), outcome.rows
+
+
+def sdm_baseline(grid: Path, rows: list) -> float | None:
+    """Seconds of the 640-step first-order semi-discretization on the first pose of `rows` that
+    chatters above 1 kHz, its spindle modes (above 1 kHz) alone, bare (None: no such pose); its
+    depth is printed beside the sweep's own."""
+    spindle_share = sum((r["dominant_chatter_hz"] or 0.0) > 1000.0 for r in rows) / len(rows)
+    print(f"  {spindle_share:.0%} of the poses chatter at a spindle mode (the others at robot modes, which the semi-discretization needs all modes for)")
+    i = next((k for k, r in enumerate(rows) if (r["dominant_chatter_hz"] or 0.0) > 1000.0), None)
+    if i is None:
+        return None
+    sweep_mm = rows[i]["critical_depth_mm"]
+    spec = SweepSpec(poses=str(grid), cut=str(CUT), twin=str(TWIN))
+    poses, grid_twin = read_sweep_poses(spec.poses)
+    dyn = pose_modes_of(context(spec.to_json(), grid_twin), poses, [i])[i].dyn
+    keep = np.flatnonzero(dyn.fn_hz > 1000.0)
+    spindle = ToolTipDynamics(dyn.fn_hz[keep], dyn.zeta[keep], dyn.shapes[:, keep])
+    cut, rpm, _ = read_cut(str(CUT))
+    start = time.perf_counter()
+    result = StabilityModel(spindle, cut, Discretization(640, order=1)).critical_depths([rpm], rel_tol=1e-4)
+    seconds = time.perf_counter() - start
+    print(f"  semi-discretization, first order, 640 steps, pose {poses.pose_id[i]}'s {len(keep)} spindle modes alone, bare: "
+          f"{result.depth_m[0] * 1e3:.4f} mm ({result.depth_m[0] * 1e3 / sweep_mm - 1:+.1%} from the sweep's {sweep_mm:.4f} mm), {seconds:.2f} s")
+    return seconds
 
 
 def main() -> None:
@@ -63,15 +103,20 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         print(f"sweep of about {args.poses} poses, default settings, 2 local workers (target <= 300 s for 10,000):")
-        per_pose = run(grid_file(tmp, args.poses), tmp / "big", 2)
+        grid = grid_file(tmp, args.poses)
+        per_pose, rows = run(grid, tmp / "big", 2)
         print(f"  ratio to the 300 s target, scaled to 10,000 poses: {per_pose * 10_000 / 300:.2f}")
+        print("the semi-discretization beside it (same run, same machine):")
+        sdm_seconds = sdm_baseline(grid, rows)
+        sdm_sweep = (sdm_seconds or np.nan) * 10_000 * 2 / 2  # two structures a pose, two workers
+        print(f"  scaled to 10,000 poses x 2 structures on 2 workers: at least {sdm_sweep:.0f} s for poses like this one; the sweep {sdm_sweep / (per_pose * 10_000):.0f}x faster")
         print(f"speedup on about {args.speedup_poses} poses (same run, same machine):")
         small = grid_file(tmp, args.speedup_poses)
         # at least 16 chunks, so that two workers can share them evenly (625 poses in chunks of 250
         # are 3, of the default 500 two; measured 2026-12-05: 1.58x either way, a run's fixed costs decide)
         chunk = max(1, args.speedup_poses // 16)
-        one = run(small, tmp / "one", 1, chunk)
-        two = run(small, tmp / "two", 2, chunk)
+        one, _ = run(small, tmp / "one", 1, chunk)
+        two, _ = run(small, tmp / "two", 2, chunk)
         print(f"  1 -> 2 workers: {one / two:.2f}x")  # seconds per pose, same poses
 
 
