@@ -29,7 +29,6 @@ import numpy as np
 from blas_kernel import describe
 
 from posedyn.dynamics import ToolTipDynamics
-from posedyn.io.cut import read_cut
 from posedyn.io.shipped import DATASETS
 from posedyn.stability import Discretization, StabilityModel
 from service.sweep import SweepSpec
@@ -57,14 +56,13 @@ def grid_file(folder: Path, poses: int) -> Path:
     return path
 
 
+def bench_spec(grid: Path, chunk_size: int | None = None) -> SweepSpec:
+    """The benchmark's sweep: the twin's poses of `grid` at the demo sweep's cut, default settings."""
+    return SweepSpec(poses=str(grid), cut=str(CUT), twin=str(TWIN), **({} if chunk_size is None else {"chunk_size": chunk_size}))
+
+
 def run(grid: Path, out: Path, workers: int, chunk_size: int | None = None):
-    spec = SweepSpec(
-        poses=str(grid),
-        cut=str(CUT),
-        twin=str(TWIN),
-        **({} if chunk_size is None else {"chunk_size": chunk_size}),
-    )
-    outcome = run_sweep(spec, out, workers=workers)
+    outcome = run_sweep(bench_spec(grid, chunk_size), out, workers=workers)
     reachable = sum(1 for r in outcome.rows if r["reachable"])
     print(f"  {len(outcome.rows)} poses ({reachable} reachable), {workers} worker(s): {outcome.seconds:.1f} s ({outcome.seconds / len(outcome.rows) * 1e3:.1f} ms per pose)")
     return outcome.seconds / len(outcome.rows), outcome.rows
@@ -74,20 +72,21 @@ def sdm_baseline(grid: Path, rows: list) -> float | None:
     """Seconds of the 640-step first-order semi-discretization on the first pose of `rows` that
     chatters above 1 kHz, its spindle modes (above 1 kHz) alone, bare (None: no such pose); its
     depth is printed beside the sweep's own."""
-    spindle_share = sum((r["dominant_chatter_hz"] or 0.0) > 1000.0 for r in rows) / len(rows)
-    print(f"  {spindle_share:.0%} of the poses chatter at a spindle mode (the others at robot modes, which the semi-discretization needs all modes for)")
-    i = next((k for k, r in enumerate(rows) if (r["dominant_chatter_hz"] or 0.0) > 1000.0), None)
-    if i is None:
+    spindle = [k for k, r in enumerate(rows) if (r["dominant_chatter_hz"] or 0.0) > 1000.0]
+    print(f"  {len(spindle) / len(rows):.0%} of the poses chatter at a spindle mode (the others at robot modes, which the semi-discretization needs all modes for)")
+    if not spindle:
         return None
+    i = spindle[0]
     sweep_mm = rows[i]["critical_depth_mm"]
-    spec = SweepSpec(poses=str(grid), cut=str(CUT), twin=str(TWIN))
+    spec = bench_spec(grid)
     poses, grid_twin = read_sweep_poses(spec.poses)
-    dyn = pose_modes_of(context(spec.to_json(), grid_twin), poses, [i])[i].dyn
+    ctx = context(spec.to_json(), grid_twin)
+    dyn = pose_modes_of(ctx, poses, [i])[i].dyn
     keep = np.flatnonzero(dyn.fn_hz > 1000.0)
-    spindle = ToolTipDynamics(dyn.fn_hz[keep], dyn.zeta[keep], dyn.shapes[:, keep])
-    cut, rpm, _ = read_cut(str(CUT))
+    spindle_only = ToolTipDynamics(dyn.fn_hz[keep], dyn.zeta[keep], dyn.shapes[:, keep])
+    cut, rpm = ctx.schedule.cut, ctx.schedule.rpm
     start = time.perf_counter()
-    result = StabilityModel(spindle, cut, Discretization(640, order=1)).critical_depths([rpm], rel_tol=1e-4)
+    result = StabilityModel(spindle_only, cut, Discretization(640, order=1)).critical_depths([rpm], rel_tol=1e-4)
     seconds = time.perf_counter() - start
     print(f"  semi-discretization, first order, 640 steps, pose {poses.pose_id[i]}'s {len(keep)} spindle modes alone, bare: "
           f"{result.depth_m[0] * 1e3:.4f} mm ({result.depth_m[0] * 1e3 / sweep_mm - 1:+.1%} from the sweep's {sweep_mm:.4f} mm), {seconds:.2f} s")
