@@ -147,3 +147,19 @@ def test_a_file_of_another_kind_given_as_the_modal_table_is_named_as_such(datase
     """A cut file given to `data check` was refused for its first comment line as a column name."""
     result = posedyn("data", "check", datasets / "seeds/hou2023_cut.toml")
     assert result.returncode == 2 and "expected a modal-test table (CSV" in result.stderr and "a .toml file (a cut" in result.stderr
+
+
+def test_data_summary_checks_parameter_files_as_the_commands_that_read_them(tmp_path, datasets):
+    """A cut file that `schedule --cut` refuses (0 teeth, a word for the speed, a missing
+    coefficient) is invalid in the summary too, named as the command names it."""
+    cut = (datasets / "cuts/sweep_demo_cut.toml").read_text()
+    (tmp_path / "a_ok.toml").write_text(cut)
+    (tmp_path / "b_teeth0.toml").write_text(cut.replace("teeth = 3", "teeth = 0"))
+    (tmp_path / "c_rpm_word.toml").write_text(cut.replace("rpm = 2000.0", 'rpm = "fast"'))
+    (tmp_path / "d_no_kt.toml").write_text(cut.replace("kt_mpa = 796.0\n", ""))
+    result = posedyn("data", "summary", tmp_path, "--json")
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert [item["kind"] for item in json.loads(result.stdout)] == ["cut", "invalid", "invalid", "invalid"]
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 3 and "'cut.teeth'" in lines[0] and str(tmp_path / "b_teeth0.toml") in lines[0]
+    assert str(tmp_path / "c_rpm_word.toml") in lines[1] and str(tmp_path / "d_no_kt.toml") in lines[2]

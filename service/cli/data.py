@@ -12,7 +12,11 @@ from rich.table import Table
 from posedyn.errors import InputError
 from posedyn.io import flatten, read_modal_table, read_params
 from posedyn.io.measurements import read_measurements
+from posedyn.io.cut import read_cut, read_sle_cut
 from posedyn.io.shipped import DATASETS
+from posedyn.io.tool_file import read_tool
+from posedyn.io.twin_file import read_twin
+from absorber.files import read_absorber, read_actuator, read_host
 from service.cli.common import console, print_json, soft_mode_warnings
 
 app = typer.Typer(help="Validate and summarise modal-test tables and parameter files.", no_args_is_help=True)
@@ -89,6 +93,18 @@ def data_summary(
         raise typer.Exit(2)
 
 
+#: The reader each kind of parameter file is used with, run on it by `data summary` (its checks of
+#: ranges, keys and types are what "valid" means).
+FULL_READERS = {
+    "cut": lambda path: (read_cut(path), read_sle_cut(path)),
+    "mrf_absorber": read_absorber,
+    "active_damping": read_actuator,
+    "host_and_cut": read_host,
+    "robot_twin": read_twin,
+    "tool": read_tool,
+}
+
+
 def _file_summary(path: Path) -> dict:
     """One file's entry of `data summary` (InputError where it is not valid)."""
     try:
@@ -104,6 +120,9 @@ def _file_summary(path: Path) -> dict:
     if path.suffix == ".csv":
         return {"file": str(path), "kind": "modal_table", **read_modal_table(path).summary()}
     params = read_params(path)
+    reader = FULL_READERS.get(params["meta"]["kind"])
+    if reader is not None:  # valid only where the command that uses the file takes it (a cut with 0 teeth is no cut)
+        reader(path)
     values = {k: v for k, v in flatten(params).items() if not k.startswith("meta.")}
     return {"file": str(path), "kind": params["meta"]["kind"], "source": params["meta"]["source"], "values": values}
 
