@@ -11,8 +11,8 @@ from rich.table import Table
 
 from posedyn.errors import InputError
 from posedyn.io import flatten, read_modal_table, read_params
-from posedyn.io.measurements import read_measurements
 from posedyn.io.cut import read_cut, read_sle_cut
+from posedyn.io.measurements import read_measurements
 from posedyn.io.shipped import DATASETS
 from posedyn.io.tool_file import read_tool
 from posedyn.io.twin_file import read_twin
