@@ -181,11 +181,12 @@ def twin_campaign(seed: int, mass_kg: float = 0.0, joint_scale=(1.0,) * 6, gravi
     real.params = real.params.scaled(joint_scale)
     design = campaign_design(seed)
     design = design.take(np.flatnonzero(np.isin(design.quantity, ("fn_hz", "k_n_per_m"))))
-    if sensor_kg:  # the impact tests also read the first spindle mode (mode 3 of x and y), where a sensor's mass shows
+    first_spindle = nominal.params.robot_modes_per_direction + 1  # the modal tables number the spindle modes after the robot's
+    if sensor_kg:  # the impact tests also read the first spindle mode of x and y, where a sensor's mass shows
         spindle = design.take(np.flatnonzero(design.quantity == "fn_hz"))
         design = replace(design, quantity=np.concatenate([design.quantity, spindle.quantity]), value=np.concatenate([design.value, spindle.value]),
                          std=np.concatenate([design.std, spindle.std]), pose_id=np.concatenate([design.pose_id, spindle.pose_id]),
-                         direction=np.concatenate([design.direction, spindle.direction]), mode=np.concatenate([design.mode, np.full(len(spindle), 3.0)]),
+                         direction=np.concatenate([design.direction, spindle.direction]), mode=np.concatenate([design.mode, np.full(len(spindle), float(first_spindle))]),
                          conditions={c: np.concatenate([v, spindle.conditions[c]]) for c, v in design.conditions.items()})
     y, m = nominal.predict(design)
     truth, _ = real.predict(design)
@@ -196,7 +197,7 @@ def twin_campaign(seed: int, mass_kg: float = 0.0, joint_scale=(1.0,) * 6, gravi
     if sensor_kg:  # the robot modes through the twin's mass matrix; each spindle mode by its own modal mass: fn sqrt(m / (m + m_s)), m = k / w^2
         real.params = replace(real.params, tip_mass_kg=sensor_kg)
         robot_rows, _ = real.predict(design)
-        spindle = m.mode == 3
+        spindle = m.mode == first_spindle
         modal_mass = m.conditions["model_k_n_per_m"] / (2 * np.pi * np.where(m.quantity == "fn_hz", y, np.nan)) ** 2
         truth = np.where(spindle, np.where(m.quantity == "fn_hz", y * np.sqrt(modal_mass / (modal_mass + sensor_kg)), truth), robot_rows)
     if gravity_per_knm:

@@ -2,12 +2,13 @@
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pinocchio as pin
 import pytest
 
-from posedyn.robot.campaign import GridPose, Noise, generate_campaign, pose_modes
+from posedyn.robot.campaign import GridPose, Noise, generate_campaign, kept_compliance, least_kept_compliance, pose_modes
 from posedyn.robot.twin_effects import DeviceMass, parse_effect
 from posedyn.errors import InputError
 from posedyn.io import format_modal_table, read_modal_table
@@ -199,9 +200,32 @@ def test_noise_free_campaign_is_the_twin(twin, datasets):
     _, modes = pose_modes(robot, poses[0], params)
     x = table.modes(poses[0].label, "x")
     k = modes.stiffness("x")
-    assert [m.fn_hz for m in x[:2]] == pytest.approx(modes.fn_hz[:2], rel=1e-12)
-    assert [m.k_n_per_m for m in x[:2]] == pytest.approx(k[:2], rel=1e-12)
-    assert x[2].fn_hz == 1443.5  # spindle modes follow
+    count = params.robot_modes_per_direction
+    assert count == 6  # the shipped twin's tables keep every robot mode
+    assert [m.fn_hz for m in x[:count]] == pytest.approx(modes.fn_hz, rel=1e-12)
+    assert [m.k_n_per_m for m in x[:count]] == pytest.approx(k, rel=1e-12)
+    assert x[count].fn_hz == 1443.5  # spindle modes follow
+
+
+def test_a_campaign_that_keeps_fewer_robot_modes_says_how_much_compliance_it_leaves_out(twin, datasets, tmp_path):
+    """seed 003's grid, the two lowest robot modes: at some pose they carry 3 % of the tool tip's
+    static compliance in y (every mode: all of it); the share is sum 1/k over the kept modes."""
+    robot, params = twin
+    poses = list(read_grid(datasets / "campaigns/seed003_grid.toml").poses)
+    _, modes = pose_modes(robot, poses[0], params)
+    k = modes.stiffness("y")
+    assert kept_compliance(modes, "y", 2) == pytest.approx((1 / k[:2]).sum() / (1 / k).sum(), rel=1e-12)
+    assert kept_compliance(modes, "y", 6) == pytest.approx(1.0, rel=1e-12)
+    assert least_kept_compliance(robot, poses[:5], params) == (1.0, "", "")
+    share, pose, direction = least_kept_compliance(robot, poses, replace(params, robot_modes_per_direction=2))
+    assert share < 0.05 and direction == "y" and pose in {p.label for p in poses}
+    twin2 = tmp_path / "twin2.toml"
+    twin2.write_text((datasets / "robots/kr_r2700_twin.toml").read_text().replace("robot_modes_per_direction = 6", "robot_modes_per_direction = 2")
+                     .replace('urdf = "kr_r2700_spindle.urdf"', f'urdf = "{(datasets / "robots/kr_r2700_spindle.urdf").as_posix()}"'))
+    result = run_cli("twin", "campaign", "--grid", datasets / "campaigns/seed003_grid.toml", "--twin", twin2, "--out", tmp_path / "c2.csv", "--json")
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)["least_kept_compliance"] == pytest.approx(share, rel=1e-9)
+    assert f"keeps only {100 * share:.0f} % of the tool tip's static robot compliance in y at pose {pose}" in result.stderr
 
 
 def test_shipped_campaign_matches_its_recorded_recipe(datasets, tmp_path):
@@ -215,7 +239,8 @@ def test_shipped_campaign_matches_its_recorded_recipe(datasets, tmp_path):
     assert again.poses.pose_id == shipped.poses.pose_id
     for name in ("fn_hz", "zeta", "k_n_per_m"):
         assert np.allclose(getattr(again, name), getattr(shipped, name), rtol=1e-9, atol=0)
-    assert again.summary()["modes"] == {"x": 4, "y": 4, "z": 2}
+    assert again.summary()["modes"] == {"x": 8, "y": 8, "z": 6}
+    assert json.loads(result.stdout)["least_kept_compliance"] == 1.0 and "warning" not in result.stderr
 
 
 def test_twin_modes_cli_and_bad_grid(datasets, tmp_path):

@@ -39,7 +39,7 @@ class TwinParameters:
     joint_stiffness_nm_per_rad: tuple[float, ...] = (3.0e6, 4.0e6, 2.0e6, 6.0e5, 6.0e5, 4.5e5)
     zeta: float = 0.03
     spindle_modes: dict = field(default_factory=dict)
-    robot_modes_per_direction: int = 3
+    robot_modes_per_direction: int = 6  # every robot mode: fewer can leave out the one that chatters (`least_kept_compliance`)
     flange_mass_kg: float = 0.0
     flange_mass_offset_m: tuple[float, float, float] = (0.15, 0.0, 0.12)
     gravity_softening_per_knm: float = 0.0  # c: joint j's stiffness k_j / (1 + c |tau_g,j(q)| / 1 kN m) under its gravity torque

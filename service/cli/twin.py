@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 from typing import Optional
 
@@ -14,7 +15,7 @@ from posedyn.io import write_modal_table
 from posedyn.io.grid import read_grid
 from posedyn.io.twin_file import load_twin
 from posedyn.robot import ToolPose
-from posedyn.robot.campaign import GridPose, Noise, generate_campaign, pose_modes
+from posedyn.robot.campaign import GridPose, Noise, generate_campaign, least_kept_compliance, pose_modes
 from posedyn.robot.twin_effects import parse_effect
 from service.cli.common import console, flag_errors, output_file, print_json
 
@@ -26,6 +27,10 @@ EFFECT = typer.Option(None, "--effect", help="Hide a named effect, e.g. device_m
 #: A mode whose tool-tip stiffness in a direction is above this many times its lowest is shown as
 #: not seen there (a new user read 1.48e+36 N/m as a number).
 UNSEEN = 1e6
+
+#: `twin campaign` warns when its tables keep less of the tool tip's static robot compliance than
+#: this at some pose (`least_kept_compliance`).
+KEPT_COMPLIANCE_WARN = 0.9
 
 @app.command("campaign")
 def campaign(
@@ -50,11 +55,17 @@ def campaign(
     label = f"twin {robot.name} seed {seed}" + ("; effects " + ", ".join(e.name for e in effects) if effects else "")
     table = generate_campaign(robot, list(g.poses), params, noise, seed, effects, source=label)
     write_modal_table(table, out)
-    summary = {"out": str(out), "poses": len(table.poses), "rows": len(table), "seed": seed, "effects": [e.name for e in effects]}
+    share, at_pose, direction = least_kept_compliance(robot, list(g.poses), params, effects)
+    summary = {"out": str(out), "poses": len(table.poses), "rows": len(table), "seed": seed, "effects": [e.name for e in effects],
+               "least_kept_compliance": share}
     if as_json:
         print_json(summary)
     else:
         console.print(f"wrote {out}: {summary['rows']} rows, {summary['poses']} poses (seed {seed}; effects: {', '.join(summary['effects']) or 'none'})")
+    if share < KEPT_COMPLIANCE_WARN:
+        print(f"warning: robot_modes_per_direction = {params.robot_modes_per_direction} keeps only {100 * share:.0f} % of the tool tip's "
+              f"static robot compliance in {direction} at pose {at_pose}; a mode left out can be the one that chatters "
+              "(6 in the twin file keeps every robot mode)", file=sys.stderr)
 
 
 @app.command("modes")
