@@ -80,14 +80,20 @@ def test_lobes_json_csv_and_plot(datasets, tmp_path, method):
     )
     assert result.returncode == 0, result.stderr
     out = json.loads(result.stdout)
-    extra = {"floquet": {"converged"}, "sdm": {"steps"}, "zoa": set()}[method]
+    extra = {"floquet": {"converged", "rel_error_estimate"}, "sdm": {"steps"}, "zoa": set()}[method]
     assert set(out) == {"rpm", "critical_depth_mm", "absolute_limit_mm", "absolute_limit_source", "method"} | extra and out["method"] == method
     assert out.get("steps", 40) == 40  # the semi-discretization says which step count it used
     assert len(out["rpm"]) == len(out["critical_depth_mm"]) == 11
     i = out["rpm"].index(2000.0)
     assert out["critical_depth_mm"][i] == pytest.approx(0.875 if method == "zoa" else 0.891, abs=0.005)
     assert 0 < out["absolute_limit_mm"] <= min(out["critical_depth_mm"])
-    assert csv_path.read_text().splitlines()[0] == "rpm,critical_depth_mm"
+    lines = csv_path.read_text().splitlines()
+    if method == "floquet":  # every speed says how accurate it is, in the JSON and the CSV
+        assert all(ok for ok in out["converged"]) and all(0 <= e <= 0.02 for e in out["rel_error_estimate"])
+        assert lines[0] == "rpm,critical_depth_mm,rel_error_estimate,converged"
+        assert [float(line.split(",")[2]) for line in lines[1:]] == out["rel_error_estimate"] and lines[1].endswith(",true")
+    else:
+        assert lines[0] == "rpm,critical_depth_mm"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 

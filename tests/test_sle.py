@@ -177,6 +177,7 @@ def test_sle_says_when_the_cut_chatters(tmp_path):
             "--helix-deg", "30", "--radial-depth-mm", "3", "--feed-per-tooth-mm", "0.05", "--milling", "down"]
     out = json.loads(run_cli(*args, "--axial-depth-mm", "5", "--stability", "--json").stdout)
     assert out["stable"] is False and out["critical_depth_mm"] == pytest.approx(0.4263, rel=0.02)
+    assert out["converged"] is True and 0 <= out["rel_error_estimate"] <= 0.02  # the depth says how accurate it is
     assert "CHATTERS" in run_cli(*args, "--axial-depth-mm", "5", "--stability").stdout
     assert json.loads(run_cli(*args, "--axial-depth-mm", "0.3", "--stability", "--json").stdout)["stable"] is True
     assert "stable cut" in run_cli(*args, "--axial-depth-mm", "5").stdout
@@ -185,6 +186,7 @@ def test_sle_says_when_the_cut_chatters(tmp_path):
     ranged = [a for a in args if a not in ("--rpm", "600")] + ["--rpm-min", "600", "--rpm-max", "610", "--rpm-steps", "2", "--axial-depth-mm", "5", "--stability"]
     out = json.loads(run_cli(*ranged, "--json").stdout)  # per speed as at one speed (the critical depths were left out)
     assert out["stable"] == [False, False] and out["critical_depth_mm"][0] == pytest.approx(0.4263, rel=0.02)
+    assert out["converged"] == [True, True] and all(0 <= e <= 0.02 for e in out["rel_error_estimate"])
     assert "SLE from" not in run_cli(*ranged).stdout  # no range of SLEs where none applies
 
 

@@ -225,13 +225,14 @@ def schedule(
         print_json(entries)
         return
     t = Table(title=f"absorber schedule ({policy.value}) at {rpm:g} rpm", title_justify="left")
-    for c in ("pose", "critical mm", "chatter Hz", "target Hz", "field mT", "current A", "feasible", "with absorber mm"):
+    for c in ("pose", "critical mm", "chatter Hz", "target Hz", "field mT", "current A", "feasible", "with absorber mm", "depths within"):
         t.add_column(c, justify="right")
     for e in entries:
         a = e["absorber"]
         t.add_row(
             e["pose_id"], _fmt(e["critical_depth_mm"]), f"{e['dominant_chatter_hz']:.2f}", f"{a['target_hz']:.2f}", f"{a['field_mt']:.1f}",
             _fmt(a["current_a"]), "yes" if a["feasible"] else "NO", _fmt(e["critical_depth_with_absorber_mm"]),
+            _accuracy(e["stability"], e["stability_with_absorber"]),
         )
     console.print(t)
     if robust:
@@ -248,6 +249,16 @@ def schedule(
         console.print(t)
     if out is not None:
         console.print(f"wrote {out}")
+
+
+def _accuracy(*stability: dict) -> str:
+    """The worse of the depths' accuracies, as `chatter` says it: "0.91 %" (estimated), "NOT
+    converged (5 %)", or "not estimated" for the semi-discretization override."""
+    if any(s["converged"] is None for s in stability):
+        return f"not estimated ({stability[0]['method']})"
+    worst = max((s["rel_error_estimate"] for s in stability if s["rel_error_estimate"] is not None), default=math.inf)
+    shown = "inf" if not math.isfinite(worst) else f"{100 * worst:.2g}"
+    return f"{shown} %" if all(s["converged"] for s in stability) else f"NOT converged ({shown} %)"
 
 
 def _fmt(value):

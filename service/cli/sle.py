@@ -31,11 +31,16 @@ def _stability_note(checked: bool) -> dict:
     return {"stability_checked": True} if checked else {"stability_checked": False, "note": UNCHECKED}
 
 
-def _stability(dyn: ToolTipDynamics, cut: SleCut, rpm: np.ndarray) -> np.ndarray:
+def _stability(dyn: ToolTipDynamics, cut: SleCut, rpm: np.ndarray) -> list:
     """Critical depth (m) of the SLE's cut at each speed (converged engine, straight flutes):
     the SLE is the error of a stable cut; above that depth the cut chatters and it means nothing."""
     stability_cut = Cut(teeth=cut.teeth, kt_pa=cut.kt_pa, kn_pa=cut.kn_pa, radial_immersion=min(1.0, cut.radial_depth_m / cut.tool_diameter_m), milling=cut.milling)
-    return np.array([r.depth_m for r in critical_lobes(dyn, stability_cut, rpm, workers=2)])
+    return critical_lobes(dyn, stability_cut, rpm, workers=2)
+
+
+def _accuracy(results: list) -> dict:
+    """The engine's accuracy per speed, as `lobes --json` gives it."""
+    return {"converged": [r.converged for r in results], "rel_error_estimate": [finite_or_none(r.rel_error_estimate) for r in results]}
 
 
 def _inputs(modes, extra, pose_id, teeth, kt_mpa, kn_mpa, tool_diameter_mm, helix_deg, radial_depth_mm, axial_depth_mm, feed_per_tooth_mm, milling, direction):
@@ -116,8 +121,10 @@ def sle(
             value = float(sle_m(dyn, cut, rpm, slices, offset_m=offset)[0])
         out = {"sle_um": value * 1e6, **_stability_note(stability)}
         if stability:
-            critical = float(_stability(dyn, cut, np.array([rpm]))[0])
-            out.update(critical_depth_mm=finite_or_none(critical * 1e3), stable=bool(cut.axial_depth_m < critical))
+            result = _stability(dyn, cut, np.array([rpm]))[0]
+            critical = result.depth_m
+            out.update(critical_depth_mm=finite_or_none(critical * 1e3), stable=bool(cut.axial_depth_m < critical),
+                       converged=result.converged, rel_error_estimate=finite_or_none(result.rel_error_estimate))
         if as_json:
             print_json(out)
             return
@@ -132,10 +139,12 @@ def sle(
         values = sle_m(dyn, cut, speeds, slices, offset_m=offset)
     out = {"rpm": speeds.tolist(), "sle_um": (values * 1e6).tolist(), **_stability_note(stability)}
     if stability:
-        critical = _stability(dyn, cut, speeds)
+        results = _stability(dyn, cut, speeds)
+        critical = np.array([r.depth_m for r in results])
         stable = cut.axial_depth_m < critical
         out["critical_depth_mm"] = [finite_or_none(d * 1e3) for d in critical]  # (the README's promise, as at one speed)
         out["stable"] = stable.tolist()
+        out.update(_accuracy(results))
     if as_json:
         print_json(out)
         return

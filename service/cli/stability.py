@@ -210,7 +210,7 @@ def lobes(
     feed_angle_deg: float = FEED_ANGLE,
     steps: int = STEPS,
     order: int = ORDER,
-    csv_out: Optional[Path] = typer.Option(None, "--csv", help="Write rpm, critical_depth_mm to this CSV."),
+    csv_out: Optional[Path] = typer.Option(None, "--csv", help="Write rpm, critical_depth_mm (and, with floquet, rel_error_estimate, converged) to this CSV."),
     plot: Optional[Path] = typer.Option(None, "--plot", help="Write a PNG of the lobes."),
     workers: int = typer.Option(2, "--workers", min=1, help="Processes sharing the speeds (floquet; one core each)."),
     as_json: bool = JSON,
@@ -230,11 +230,12 @@ def lobes(
     if rpm_steps < 2:
         raise InputError("at least 2 speeds", got=rpm_steps, column="--rpm-steps")
     rpm = np.linspace(rpm_min, rpm_max, rpm_steps)
-    converged, no_growth = None, np.full(len(rpm), np.nan)
+    converged, no_growth, rel_error = None, np.full(len(rpm), np.nan), None
     if method is Method.floquet:
         results = _lobes_with_progress(model, rpm, workers)
         depth = np.array([r.depth_m for r in results])
         converged = [r.converged for r in results]
+        rel_error = [finite_or_none(r.rel_error_estimate) for r in results]
         no_growth = np.array([r.no_growth_depth_m for r in results])
         limit = absolute_limit(model.dyn, model.cut, depth)
         absolute, source = limit.depth_m, limit.source
@@ -249,18 +250,21 @@ def lobes(
     out = {"rpm": rpm.tolist(), "critical_depth_mm": depth_mm, "absolute_limit_mm": finite_or_none(absolute * 1e3), "absolute_limit_source": source, "method": method.value}
     if converged is not None:
         out["converged"] = converged
+        out["rel_error_estimate"] = rel_error
     if np.isfinite(no_growth).any():  # (where only the surface remembers the last pass)
         out["no_growth_depth_mm"] = [finite_or_none(d * 1e3) for d in no_growth]
     if method is Method.sdm:
         out["steps"] = model.disc.steps
     if csv_out is not None:
-        _write_csv(csv_out, rpm, depth_mm)
+        _write_csv(csv_out, rpm, depth_mm, rel_error, converged)
     if plot is not None:
         _plot(plot, rpm, depth * 1e3, absolute * 1e3, f"pose {pose}, {method.value}", no_growth * 1e3)
     if as_json:
         print_json(out)
         return
     how = f"{method.value}, {model.disc.steps} steps per delay: error not estimated" if method is Method.sdm else method.value
+    if rel_error is not None and any(e is not None for e in rel_error):
+        how += f", within {100 * max(e for e in rel_error if e is not None):.2g} % (estimated, the worst speed)"
     console.print(f"pose {pose}: {how} lobes over {rpm_min:g}-{rpm_max:g} rpm")
     said = {"zoa": "zeroth-order estimate", "sdm": "semi-discretization lobe bottoms", "computed": "the lowest depth computed: the zeroth-order estimate is above it"}[source]
     console.print(f"  lowest critical depth {np.min(depth) * 1e3:.4g} mm at {rpm[np.argmin(depth)]:.0f} rpm; absolute limit {absolute * 1e3:.4g} mm ({said})")
@@ -280,8 +284,14 @@ def lobes(
             console.print(f"  wrote {path}")
 
 
-def _write_csv(path: Path, rpm, depth_mm) -> None:
-    lines = ["rpm,critical_depth_mm"] + [f"{float(r)!r},{'' if d is None else repr(d)}" for r, d in zip(rpm, depth_mm)]
+def _write_csv(path: Path, rpm, depth_mm, rel_error=None, converged=None) -> None:
+    """rpm, critical_depth_mm and, where the engine estimated them, rel_error_estimate and converged."""
+    text = lambda v: "" if v is None else repr(v)  # noqa: E731
+    if rel_error is None:
+        lines = ["rpm,critical_depth_mm"] + [f"{float(r)!r},{text(d)}" for r, d in zip(rpm, depth_mm)]
+    else:
+        lines = ["rpm,critical_depth_mm,rel_error_estimate,converged"] + [
+            f"{float(r)!r},{text(d)},{text(e)},{str(bool(c)).lower()}" for r, d, e, c in zip(rpm, depth_mm, rel_error, converged)]
     write_text_atomic(path, "\n".join(lines) + "\n")
 
 
