@@ -38,7 +38,7 @@ demo: $(STAMP)
 		--kt-mpa 597.3 --kn-mpa 59.8 --radial-immersion 0.16 --milling down
 	@echo
 	@echo "Where simulation and measurement disagree: 32 measured walls (surface location error) against the twin"
-	$(BIN)/posedyn gap --measured datasets/campaigns/sle_walls.csv --twin --cut datasets/cuts/sweep_demo_cut.toml --out build/demo/gap_sle
+	$(BIN)/posedyn gap --measured datasets/campaigns/sle_walls.csv --twin --cut datasets/cuts/walls_geometric_cut.toml --out build/demo/gap_sle
 	@echo
 	@echo "Sweep the seed 003 workspace (112 poses) with the trained model on 2 Dask workers: maps, lobes, worst poses"
 	rm -rf build/demo/sweep

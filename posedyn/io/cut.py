@@ -21,14 +21,14 @@ from posedyn.stability.cutting import check_rpm
 CUT_KEYS = {
     "cut": ("rpm", "teeth", "kt_mpa", "kn_mpa", "radial_immersion", "milling", "feed_angle_deg", "tool_diameter_mm"),
     "stability": ("steps",),
-    "sle": ("helix_deg", "axial_depth_mm", "feed_per_tooth_mm", "offset_um"),
+    "sle": ("helix_deg", "axial_depth_mm", "feed_per_tooth_mm", "offset_um", "engagement"),
 }
 
 
 def _read(path: str | os.PathLike) -> dict:
     p = read_params(path, kind="cut")
     check_keys(p, CUT_KEYS, path, "cut file")
-    check_numbers(p, path, text=("cut.milling",))
+    check_numbers(p, path, text=("cut.milling", "sle.engagement"))
     return p
 
 
@@ -58,7 +58,8 @@ FILE_KEYS = {"kt_pa": ("cut.kt_mpa", 1e-6), "kn_pa": ("cut.kn_mpa", 1e-6), "teet
 
 
 def read_sle_cut(path: str | os.PathLike) -> tuple[SleCut, float] | None:
-    """(SLE cut, offset in m added to the SLE) of a cut file's `[sle]` section (None when the file has none)."""
+    """(SLE cut, offset in m added to the SLE) of a cut file's `[sle]` section (None when the file
+    has none); `[sle] engagement` "nominal" (default, seed 001's fixed angles) or "geometric"."""
     p = _read(path)
     if "sle" not in p:
         return None
@@ -76,4 +77,5 @@ def read_sle_cut(path: str | os.PathLike) -> tuple[SleCut, float] | None:
             axial_depth_m=number(s["axial_depth_mm"], "sle.axial_depth_mm") * 1e-3,
             feed_per_tooth_m=number(s["feed_per_tooth_mm"], "sle.feed_per_tooth_mm") * 1e-3,
             milling=c.get("milling", "down"),
+            engagement=s.get("engagement", "nominal"),
         ), offset_m

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from enum import Enum
 from pathlib import Path
 from typing import Optional
 
@@ -38,12 +39,18 @@ def _stability(dyn: ToolTipDynamics, cut: SleCut, rpm: np.ndarray) -> list:
     return critical_lobes(dyn, stability_cut, rpm, workers=2)
 
 
+class Engagement(str, Enum):
+    nominal = "nominal"
+    geometric = "geometric"
+
+
 def _accuracy(results: list) -> dict:
     """The engine's accuracy per speed, as `lobes --json` gives it."""
     return {"converged": [r.converged for r in results], "rel_error_estimate": [finite_or_none(r.rel_error_estimate) for r in results]}
 
 
-def _inputs(modes, extra, pose_id, teeth, kt_mpa, kn_mpa, tool_diameter_mm, helix_deg, radial_depth_mm, axial_depth_mm, feed_per_tooth_mm, milling, direction):
+def _inputs(modes, extra, pose_id, teeth, kt_mpa, kn_mpa, tool_diameter_mm, helix_deg, radial_depth_mm, axial_depth_mm, feed_per_tooth_mm, milling, direction,
+            engagement="nominal"):
     parts = []
     for path in [modes] + list(extra or []):
         table = read_modal_table(path)
@@ -59,6 +66,7 @@ def _inputs(modes, extra, pose_id, teeth, kt_mpa, kn_mpa, tool_diameter_mm, heli
         cut = SleCut(
             teeth=teeth, kt_pa=kt_mpa * 1e6, kn_pa=kn_mpa * 1e6, tool_diameter_m=tool_diameter_mm * 1e-3, helix_rad=math.radians(helix_deg),
             radial_depth_m=radial_depth_mm * 1e-3, axial_depth_m=axial_depth_mm * 1e-3, feed_per_tooth_m=feed_per_tooth_mm * 1e-3, milling=milling.value,
+            engagement=engagement,
         )
     return dyn, cut
 
@@ -82,6 +90,7 @@ def sle(
     axial_depth_mm: Optional[float] = typer.Option(None, "--axial-depth-mm"),
     feed_per_tooth_mm: Optional[float] = typer.Option(None, "--feed-per-tooth-mm"),
     milling: Milling = typer.Option(Milling.down, "--milling"),
+    engagement: Engagement = typer.Option(Engagement.nominal, "--engagement", help="nominal: seed 001's fixed engagement angles; geometric: the strip the deflected tool really cuts, its chip entering at zero thickness (radial depth up to the tool radius; tens of ms a speed)."),
     slices: int = typer.Option(20, "--axial-slices", min=1),
     offset_um: float = typer.Option(0.0, "--offset-um", help="Robot path offset added to the SLE (seed 001 Table 2)."),
     tolerance_um: float = typer.Option(2.0, "--tolerance-um", help="compensate: stop when the part error is below this."),
@@ -103,7 +112,8 @@ def sle(
         raise InputError("--rpm for compensate", got="missing", column="--rpm")
     if action is None and rpm is None and (rpm_min is None or rpm_max is None or not 0 < rpm_min < rpm_max or rpm_steps < 2):
         raise InputError("--rpm, or 0 < --rpm-min < --rpm-max with --rpm-steps >= 2", column="--rpm")
-    dyn, cut = _inputs(modes, extra, pose_id, teeth, kt_mpa, kn_mpa, tool_diameter_mm, helix_deg, radial_depth_mm, axial_depth_mm, feed_per_tooth_mm, milling, direction)
+    dyn, cut = _inputs(modes, extra, pose_id, teeth, kt_mpa, kn_mpa, tool_diameter_mm, helix_deg, radial_depth_mm, axial_depth_mm, feed_per_tooth_mm, milling, direction,
+                       engagement.value)
 
     offset = offset_um * 1e-6
     if action == "compensate":

@@ -52,6 +52,7 @@ class Baseline:
         self.cut = read_cut(cut_file)[0] if cut_file is not None else None
         sle = read_sle_cut(cut_file) if cut_file is not None else None  # its offset belongs to its own cut (feed speed, tool), not to a row's
         self.helix_deg = math.degrees(sle[0].helix_rad) if sle is not None else 0.0
+        self.engagement = sle[0].engagement if sle is not None else "nominal"  # (an updated cut says "geometric")
         self.absorber = read_absorber(absorber_file)
         # the fluid's modulus temperature law, where the absorber file states one ([drive], as `posedyn gap` writes it)
         self.drive = read_drive(absorber_file) if absorber_file is not None and "modulus_tempco_per_k" in read_params(absorber_file).get("drive", {}) else None
@@ -175,8 +176,9 @@ class Baseline:
         return y, replace(m, conditions=conditions)
 
     def _sle(self, m: Measurements, rows: list[int], structures: dict, y: np.ndarray) -> dict:
-        """SLE rows (`posedyn.sle.sle_m`, + = undercut) into y, and their context: the model's SLE
-        and mean surface-normal force (model_sle_um, model_sle_mean_force_n) and the feed speed
+        """SLE rows (`posedyn.sle.sle_m`, + = undercut; with the cut file's engagement) into y, and
+        their context: the model's SLE and mean surface-normal force (model_sle_um,
+        model_sle_mean_force_n) and the feed speed
         (feed_mm_per_min = feed per tooth x teeth x rpm where the campaign does not give it)."""
         n = len(m)
         model_sle, force = np.full(n, np.nan), np.full(n, np.nan)
@@ -220,7 +222,7 @@ class Baseline:
                 teeth=int(teeth), kt_pa=value("kt_mpa", self.cut.kt_pa * 1e-6) * 1e6, kn_pa=value("kn_mpa", self.cut.kn_pa * 1e-6) * 1e6,
                 tool_diameter_m=value("tool_diameter_mm") * 1e-3, helix_rad=math.radians(value("helix_deg", self.helix_deg)),
                 radial_depth_m=value("radial_depth_mm") * 1e-3, axial_depth_m=value("axial_depth_mm") * 1e-3,
-                feed_per_tooth_m=value("feed_per_tooth_mm") * 1e-3, milling="up" if up else "down",
+                feed_per_tooth_m=value("feed_per_tooth_mm") * 1e-3, milling="up" if up else "down", engagement=self.engagement,
             )
         except InputError as exc:
             raise exc.located(**where) from None
