@@ -68,6 +68,10 @@ from posedyn.stability.sdm import exponentials
 from dataclasses import replace
 
 
+#: How a cut engages the stock: "nominal" (seed 001's fixed angles) or "geometric" (the strip the
+#: deflected tool really cuts, `_geometric_series`).
+ENGAGEMENTS = ("nominal", "geometric")
+
 #: Largest helix angle a cut may have (80 deg; end mills have 0-60).
 HELIX_LIMIT_RAD = math.radians(80.0)
 
@@ -96,7 +100,7 @@ class SleCut:
         if not 0.0 <= self.helix_rad < HELIX_LIMIT_RAD:  # tan(90 deg) is 1.6e16: no tool
             raise InputError(f"a helix angle >= 0 and below 80 deg ({HELIX_LIMIT_RAD:.4g} rad)", got=self.helix_rad, column="helix_rad")
         check_choice("milling", self.milling, ("down", "up"))
-        check_choice("engagement", self.engagement, ("nominal", "geometric"))
+        check_choice("engagement", self.engagement, ENGAGEMENTS)
         if not 0 < self.radial_depth_m <= self.tool_diameter_m:
             raise InputError("a radial depth in (0, tool diameter]", got=self.radial_depth_m, column="radial_depth_m")
 
@@ -114,13 +118,18 @@ def normal_force(cut: SleCut, phi_bottom: np.ndarray, slices: int) -> np.ndarray
     return cut.feed_per_tooth_m * (cut.kt_pa * tangential - cut.kn_pa * normal)
 
 
+def _slice_lag_rad(cut: SleCut, slices: int) -> float:
+    """The helix lag between neighbouring slices, chi = 2 db tan(gamma) / d (seed 001 eqs. 7-8)."""
+    return 2.0 * (cut.axial_depth_m / slices) * math.tan(cut.helix_rad) / cut.tool_diameter_m
+
+
 def _unit_forces(cut: SleCut, phi_bottom: np.ndarray, slices: int) -> tuple[np.ndarray, np.ndarray]:
     """The two parts of F_y per unit feed and coefficient, sum over teeth and slices of db sin(phi)
     (sin phi, cos phi) over the engaged angles: F_y = f_t (k_t first - k_n second). They depend on
     the tool's geometry only, so cuts that differ in feed or coefficients share them."""
     st, ex = cut.engagement_rad
     db = cut.axial_depth_m / slices
-    chi = 2.0 * db * math.tan(cut.helix_rad) / cut.tool_diameter_m
+    chi = _slice_lag_rad(cut, slices)
     tangential = np.zeros_like(phi_bottom, dtype=float)
     normal = np.zeros_like(phi_bottom, dtype=float)
     for i in range(cut.teeth):
@@ -135,8 +144,7 @@ def _unit_forces(cut: SleCut, phi_bottom: np.ndarray, slices: int) -> tuple[np.n
 
 def _exit_phases(cut: SleCut, slices: int) -> np.ndarray:
     """Bottom-tooth angle at which each slice's edge generates the surface."""
-    db = cut.axial_depth_m / slices
-    chi = 2.0 * db * math.tan(cut.helix_rad) / cut.tool_diameter_m
+    chi = _slice_lag_rad(cut, slices)
     surface = math.pi if cut.milling == "down" else 0.0
     return surface + chi * np.arange(slices)
 
@@ -176,8 +184,7 @@ def sle_m(dyn: ToolTipDynamics, cut: SleCut, rpm, slices: int = 20, harmonics: i
 def _edge_angles(cut: SleCut, phi_bottom: np.ndarray, slices: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(cos phi, sin phi, faces the stock) of every tooth and slice (rows) at each bottom-tooth
     angle (columns): down milling the half phi in (pi/2, pi], up milling [0, pi/2)."""
-    db = cut.axial_depth_m / slices
-    chi = 2.0 * db * math.tan(cut.helix_rad) / cut.tool_diameter_m
+    chi = _slice_lag_rad(cut, slices)
     lag = (2 * math.pi / cut.teeth * np.arange(cut.teeth)[:, None] - chi * np.arange(slices)[None, :]).reshape(-1, 1)
     phi = np.mod(phi_bottom[None, :] + lag, 2 * math.pi)
     side = (phi > math.pi / 2) & (phi <= math.pi) if cut.milling == "down" else (phi < math.pi / 2)

@@ -82,12 +82,12 @@ def least_kept_compliance(robot: Robot, poses: list[GridPose], params: TwinParam
                           directions: tuple[str, ...] = ("x", "y", "z")) -> tuple[float, str, str]:
     """(share, pose label, direction) where a campaign's tables keep the least of the tool tip's
     static robot compliance (`kept_compliance`); (1, "", "") when they keep every robot mode."""
-    data = robot.model.createData()
     least = (1.0, "", "")
+    if params.robot_modes_per_direction >= robot.model.nv:  # one robot mode per joint: all of them kept, nothing to recompute
+        return least
+    data = robot.model.createData()
     for grid_pose in poses:
         _, modes = pose_modes(robot, grid_pose, params, effects, data)
-        if params.robot_modes_per_direction >= len(modes.fn_hz):
-            return least
         for direction in directions:
             share = kept_compliance(modes, direction, params.robot_modes_per_direction)
             if share < least[0]:

@@ -13,7 +13,7 @@ import typer
 from posedyn.dynamics import ToolTipDynamics, combine
 from posedyn.errors import InputError
 from posedyn.io import read_modal_table
-from posedyn.sle import SleCut
+from posedyn.sle import ENGAGEMENTS, SleCut
 from posedyn.sle import compensate, sle_m
 from posedyn.stability import Cut, critical_lobes
 from service.cli.common import Milling, console, finite_or_none, flag_errors, print_json
@@ -33,15 +33,14 @@ def _stability_note(checked: bool) -> dict:
 
 
 def _stability(dyn: ToolTipDynamics, cut: SleCut, rpm: np.ndarray) -> list:
-    """Critical depth (m) of the SLE's cut at each speed (converged engine, straight flutes):
-    the SLE is the error of a stable cut; above that depth the cut chatters and it means nothing."""
+    """The stability result (critical depth, accuracy) of the SLE's cut at each speed (converged
+    engine, straight flutes): the SLE is the error of a stable cut; above that depth the cut
+    chatters and it means nothing."""
     stability_cut = Cut(teeth=cut.teeth, kt_pa=cut.kt_pa, kn_pa=cut.kn_pa, radial_immersion=min(1.0, cut.radial_depth_m / cut.tool_diameter_m), milling=cut.milling)
     return critical_lobes(dyn, stability_cut, rpm, workers=2)
 
 
-class Engagement(str, Enum):
-    nominal = "nominal"
-    geometric = "geometric"
+Engagement = Enum("Engagement", {name: name for name in ENGAGEMENTS}, type=str)  # the choices `posedyn.sle` takes
 
 
 def _accuracy(results: list) -> dict:
